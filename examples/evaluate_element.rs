@@ -1,0 +1,69 @@
+//! Scores the element end to end on a simulator recording against its exact
+//! ground truth, for every target light, and records the figures in a model's
+//! manifest (`metrics.element`), which the end-to-end test checks against.
+//!
+//! ```text
+//! cargo run --release --example evaluate_element -- [--recording call] [--frames 90]
+//!     [--model models/default] [--record]
+//! ```
+
+#[path = "common/mod.rs"]
+mod common;
+
+use std::path::PathBuf;
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let flag = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let recording = flag("--recording").unwrap_or_else(|| "call".into());
+    let frames: usize = flag("--frames")
+        .map(|f| f.parse().map_err(|_| "bad --frames"))
+        .transpose()?
+        .unwrap_or(90);
+    let model = flag("--model")
+        .map(PathBuf::from)
+        .unwrap_or_else(common::default_model);
+    let record = args.iter().any(|a| a == "--record");
+
+    let dir = common::checkout().join(format!("target/recordings/{recording}-{frames}"));
+    common::ensure_recording(&dir, &recording, frames)?;
+    let mut results = serde_json::Map::new();
+    println!(
+        "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | ms/frame |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for target in ["studio", "sunset", "left-key"] {
+        let props = [("model-location", glib::Value::from(model.to_str().unwrap()))];
+        let s = common::score_recording(&dir, target, true, &props)?;
+        println!(
+            "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |",
+            s.frames,
+            s.rmse_region,
+            s.rmse_frame,
+            s.input_rmse_region,
+            s.change_rmse,
+            s.ms_per_frame
+        );
+        results.insert(target.into(), serde_json::to_value(&s).unwrap());
+    }
+    let key = format!("{recording}_{frames}");
+    if record {
+        let path = model.join("model.json");
+        let mut m: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&path).map_err(|e| e.to_string())?)
+                .map_err(|e| e.to_string())?;
+        m["metrics"]["element"][&key] = serde_json::json!({
+            "command": format!("cargo run --release --example evaluate_element -- --recording {recording} --frames {frames} --record"),
+            "targets": results,
+        });
+        std::fs::write(&path, serde_json::to_string_pretty(&m).unwrap() + "\n")
+            .map_err(|e| e.to_string())?;
+        println!("recorded in {}", path.display());
+    }
+    Ok(())
+}

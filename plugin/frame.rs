@@ -1,0 +1,579 @@
+//! Raw video frames without GStreamer: formats, plane views, colour matrices,
+//! the face crop, and putting a lighting change back into a frame.
+//!
+//! The network sees a square crop resampled to its resolution. Its output goes
+//! back as a lighting change, not as an upscaled image: with `R` the relit
+//! crop and `I` the network's input (both at network resolution) and `↑` a
+//! bilinear upsampling to the frame,
+//!
+//! `out = R↑ + g↑ · (in − I↑)`,   `g = (lum(R) + ε) / (lum(I) + ε)`
+//!
+//! so the frame keeps its own detail, scaled by the local change in
+//! brightness, and takes its low frequencies from the network. YUV is an
+//! affine function of RGB, so the same equation runs on Y, U and V planes
+//! directly and a YUV frame is never converted as a whole.
+
+/// Pixel layouts the element handles.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum PixelFormat {
+    I420,
+    Nv12,
+    Rgba,
+    Bgra,
+    Rgbx,
+    Bgrx,
+    Rgb,
+    Bgr,
+}
+
+impl PixelFormat {
+    /// Byte offsets of R, G and B and bytes per pixel, for packed RGB formats.
+    fn packed(self) -> Option<([usize; 3], usize)> {
+        match self {
+            PixelFormat::Rgba | PixelFormat::Rgbx => Some(([0, 1, 2], 4)),
+            PixelFormat::Bgra | PixelFormat::Bgrx => Some(([2, 1, 0], 4)),
+            PixelFormat::Rgb => Some(([0, 1, 2], 3)),
+            PixelFormat::Bgr => Some(([2, 1, 0], 3)),
+            PixelFormat::I420 | PixelFormat::Nv12 => None,
+        }
+    }
+
+    pub fn is_yuv(self) -> bool {
+        self.packed().is_none()
+    }
+}
+
+/// The Y'CbCr matrix and range of a YUV stream.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct YuvMatrix {
+    pub kr: f32,
+    pub kb: f32,
+    /// Limited ("TV") range: Y in [16, 235], chroma in [16, 240].
+    pub limited: bool,
+}
+
+impl YuvMatrix {
+    pub const BT601_LIMITED: YuvMatrix = YuvMatrix {
+        kr: 0.299,
+        kb: 0.114,
+        limited: true,
+    };
+    pub const BT709_LIMITED: YuvMatrix = YuvMatrix {
+        kr: 0.2126,
+        kb: 0.0722,
+        limited: true,
+    };
+
+    fn scales(&self) -> (f32, f32, f32) {
+        // (luma offset, luma scale, chroma scale), in units of 1/255.
+        if self.limited {
+            (16.0, 219.0, 224.0)
+        } else {
+            (0.0, 255.0, 255.0)
+        }
+    }
+
+    /// 8-bit Y, Cb, Cr (as f32) to RGB in [0, 1], not clamped.
+    pub fn to_rgb(&self, y: f32, cb: f32, cr: f32) -> [f32; 3] {
+        let (yo, ys, cs) = self.scales();
+        let y = (y - yo) / ys;
+        let cb = (cb - 128.0) / cs;
+        let cr = (cr - 128.0) / cs;
+        let kg = 1.0 - self.kr - self.kb;
+        let r = y + 2.0 * (1.0 - self.kr) * cr;
+        let b = y + 2.0 * (1.0 - self.kb) * cb;
+        let g = (y - self.kr * r - self.kb * b) / kg;
+        [r, g, b]
+    }
+
+    /// RGB in [0, 1] to 8-bit Y, Cb, Cr as f32 (not rounded or clamped).
+    pub fn from_rgb(&self, rgb: [f32; 3]) -> [f32; 3] {
+        let (yo, ys, cs) = self.scales();
+        let y = self.kr * rgb[0] + (1.0 - self.kr - self.kb) * rgb[1] + self.kb * rgb[2];
+        let cb = (rgb[2] - y) / (2.0 * (1.0 - self.kb));
+        let cr = (rgb[0] - y) / (2.0 * (1.0 - self.kr));
+        [yo + ys * y, 128.0 + cs * cb, 128.0 + cs * cr]
+    }
+}
+
+/// One plane: its bytes and row stride.
+#[derive(Clone, Copy, Debug)]
+pub struct Plane<'a> {
+    pub data: &'a [u8],
+    pub stride: usize,
+}
+
+/// A read-only frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Frame<'a> {
+    pub format: PixelFormat,
+    pub width: usize,
+    pub height: usize,
+    pub planes: [Plane<'a>; 3],
+    /// Used for YUV formats only.
+    pub matrix: YuvMatrix,
+}
+
+/// A frame being written.
+pub struct FrameMut<'a> {
+    pub format: PixelFormat,
+    pub width: usize,
+    pub height: usize,
+    pub planes: [(&'a mut [u8], usize); 3],
+    pub matrix: YuvMatrix,
+}
+
+/// The square the network sees, in pixels of the frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    pub x: usize,
+    pub y: usize,
+    pub size: usize,
+}
+
+impl Crop {
+    /// A square of `size_fraction` of the frame's shorter side centred at
+    /// (`cx`, `cy`) in fractions of the frame, moved inside the frame and kept
+    /// even so chroma planes align.
+    pub fn centred(width: usize, height: usize, cx: f64, cy: f64, size_fraction: f64) -> Crop {
+        let short = width.min(height);
+        let size =
+            ((short as f64 * size_fraction.clamp(0.05, 1.0)).round() as usize).clamp(2, short) & !1;
+        let place = |centre: f64, extent: usize| {
+            let x = (centre * extent as f64 - size as f64 / 2.0)
+                .round()
+                .max(0.0) as usize;
+            x.min(extent - size) & !1
+        };
+        Crop {
+            x: place(cx, width),
+            y: place(cy, height),
+            size,
+        }
+    }
+}
+
+/// Area weights of resampling `n_in` samples to `n_out`: per output sample,
+/// the first input index and the weights (summing to 1) of consecutive inputs.
+#[derive(Clone, Debug)]
+pub struct AreaWeights {
+    pub start: Vec<usize>,
+    pub weights: Vec<Vec<f32>>,
+}
+
+impl AreaWeights {
+    pub fn new(n_in: usize, n_out: usize) -> AreaWeights {
+        let scale = n_in as f64 / n_out as f64;
+        let mut start = Vec::with_capacity(n_out);
+        let mut weights = Vec::with_capacity(n_out);
+        for i in 0..n_out {
+            let (a, b) = (i as f64 * scale, (i + 1) as f64 * scale);
+            let first = a.floor() as usize;
+            let last = (b.ceil() as usize).min(n_in);
+            let w: Vec<f64> = (first..last)
+                .map(|j| (b.min(j as f64 + 1.0) - a.max(j as f64)).max(0.0))
+                .collect();
+            let sum: f64 = w.iter().sum();
+            start.push(first);
+            weights.push(w.iter().map(|v| (v / sum) as f32).collect());
+        }
+        AreaWeights { start, weights }
+    }
+}
+
+/// Area resampling of a region of one 8-bit channel (with a byte step between
+/// samples) to `res`×`res` floats in [0, 255].
+#[allow(clippy::too_many_arguments)]
+fn resample_channel(
+    plane: &Plane,
+    offset: usize,
+    step: usize,
+    x0: usize,
+    y0: usize,
+    wx: &AreaWeights,
+    wy: &AreaWeights,
+    out: &mut [f32],
+) {
+    let res_x = wx.start.len();
+    // Horizontal pass over the rows the vertical weights touch.
+    let row_first = wy.start[0];
+    let row_last = wy.start.last().unwrap() + wy.weights.last().unwrap().len();
+    let mut rows = vec![0f32; (row_last - row_first) * res_x];
+    for (r, row) in rows.chunks_exact_mut(res_x).enumerate() {
+        let base = (y0 + row_first + r) * plane.stride + offset;
+        for (o, (s, w)) in row.iter_mut().zip(wx.start.iter().zip(&wx.weights)) {
+            let mut acc = 0.0;
+            for (k, wk) in w.iter().enumerate() {
+                acc += wk * plane.data[base + (x0 + s + k) * step] as f32;
+            }
+            *o = acc;
+        }
+    }
+    for (oy, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
+        let dst = &mut out[oy * res_x..(oy + 1) * res_x];
+        dst.fill(0.0);
+        for (k, wk) in w.iter().enumerate() {
+            let src = &rows[(s + k - row_first) * res_x..(s + k - row_first + 1) * res_x];
+            for (d, v) in dst.iter_mut().zip(src) {
+                *d += wk * v;
+            }
+        }
+    }
+}
+
+/// The crop resampled to `res`×`res`, as planar sRGB in [0, 1] (3 × res × res).
+pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
+    let n = res * res;
+    let mut out = vec![0f32; 3 * n];
+    let w = AreaWeights::new(crop.size, res);
+    match frame.format.packed() {
+        Some((offsets, bpp)) => {
+            for (c, &off) in offsets.iter().enumerate() {
+                resample_channel(
+                    &frame.planes[0],
+                    off,
+                    bpp,
+                    crop.x,
+                    crop.y,
+                    &w,
+                    &w,
+                    &mut out[c * n..(c + 1) * n],
+                );
+            }
+            out.iter_mut().for_each(|v| *v /= 255.0);
+        }
+        None => {
+            // Average Y, Cb and Cr over each output pixel, then convert: the
+            // conversion is affine, so this equals averaging RGB.
+            let wc = AreaWeights::new(crop.size / 2, res);
+            let mut yuv = vec![0f32; 3 * n];
+            resample_channel(
+                &frame.planes[0],
+                0,
+                1,
+                crop.x,
+                crop.y,
+                &w,
+                &w,
+                &mut yuv[..n],
+            );
+            let (cx, cy) = (crop.x / 2, crop.y / 2);
+            match frame.format {
+                PixelFormat::I420 => {
+                    resample_channel(&frame.planes[1], 0, 1, cx, cy, &wc, &wc, &mut yuv[n..2 * n]);
+                    resample_channel(&frame.planes[2], 0, 1, cx, cy, &wc, &wc, &mut yuv[2 * n..]);
+                }
+                _ => {
+                    resample_channel(&frame.planes[1], 0, 2, cx, cy, &wc, &wc, &mut yuv[n..2 * n]);
+                    resample_channel(&frame.planes[1], 1, 2, cx, cy, &wc, &wc, &mut yuv[2 * n..]);
+                }
+            }
+            for i in 0..n {
+                let rgb = frame.matrix.to_rgb(yuv[i], yuv[n + i], yuv[2 * n + i]);
+                for c in 0..3 {
+                    out[c * n + i] = rgb[c];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Constant of the gain `g`: keeps dark regions from amplifying noise.
+const GAIN_EPSILON: f32 = 0.02;
+/// Largest gain applied to the frame's detail.
+const MAX_GAIN: f32 = 4.0;
+
+/// The lighting change at network resolution, ready to be applied to a frame.
+pub struct LightingChange {
+    res: usize,
+    /// Per output channel (R, G, B or Y, Cb, Cr in 8-bit units): base R and input I.
+    base: [Vec<f32>; 3],
+    input: [Vec<f32>; 3],
+    gain: Vec<f32>,
+}
+
+impl LightingChange {
+    /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res),
+    /// expressed in the channels of `format`.
+    pub fn new(
+        input: &[f32],
+        relit: &[f32],
+        res: usize,
+        format: PixelFormat,
+        matrix: YuvMatrix,
+    ) -> LightingChange {
+        let n = res * res;
+        let lum =
+            |img: &[f32], i: usize| 0.2126 * img[i] + 0.7152 * img[n + i] + 0.0722 * img[2 * n + i];
+        let gain = (0..n)
+            .map(|i| {
+                ((lum(relit, i) + GAIN_EPSILON) / (lum(input, i) + GAIN_EPSILON))
+                    .clamp(0.0, MAX_GAIN)
+            })
+            .collect();
+        let to_channels = |img: &[f32]| -> [Vec<f32>; 3] {
+            if format.is_yuv() {
+                let mut ch = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+                for i in 0..n {
+                    let yuv = matrix.from_rgb([img[i], img[n + i], img[2 * n + i]]);
+                    for c in 0..3 {
+                        ch[c][i] = yuv[c];
+                    }
+                }
+                ch
+            } else {
+                [0, 1, 2].map(|c| img[c * n..(c + 1) * n].iter().map(|v| v * 255.0).collect())
+            }
+        };
+        LightingChange {
+            res,
+            base: to_channels(relit),
+            input: to_channels(input),
+            gain,
+        }
+    }
+
+    /// Applies the change to the crop of `frame`. Within `feather` pixels of a
+    /// crop edge that lies inside the frame, the change fades out so the crop
+    /// leaves no seam.
+    pub fn apply(&self, frame: &mut FrameMut, crop: Crop, feather: usize) {
+        let (fw, fh) = (frame.width, frame.height);
+        let fade = Fade::new(crop, fw, fh, feather);
+        match frame.format.packed() {
+            Some((offsets, bpp)) => {
+                let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
+                for (c, &off) in offsets.iter().enumerate() {
+                    self.apply_channel(
+                        data, stride, off, bpp, crop.x, crop.y, crop.size, c, &fade, 1,
+                    );
+                }
+            }
+            None => {
+                let (y, ys) = (&mut *frame.planes[0].0, frame.planes[0].1);
+                self.apply_channel(y, ys, 0, 1, crop.x, crop.y, crop.size, 0, &fade, 1);
+                let (cx, cy, cs) = (crop.x / 2, crop.y / 2, crop.size / 2);
+                if frame.format == PixelFormat::I420 {
+                    let (u, us) = (&mut *frame.planes[1].0, frame.planes[1].1);
+                    self.apply_channel(u, us, 0, 1, cx, cy, cs, 1, &fade, 2);
+                    let (v, vs) = (&mut *frame.planes[2].0, frame.planes[2].1);
+                    self.apply_channel(v, vs, 0, 1, cx, cy, cs, 2, &fade, 2);
+                } else {
+                    let (uv, s) = (&mut *frame.planes[1].0, frame.planes[1].1);
+                    self.apply_channel(uv, s, 0, 2, cx, cy, cs, 1, &fade, 2);
+                    self.apply_channel(uv, s, 1, 2, cx, cy, cs, 2, &fade, 2);
+                }
+            }
+        }
+    }
+
+    /// One channel over a `size`×`size` region at (x0, y0) of a plane whose pixels
+    /// are `subsample` frame pixels apart.
+    #[allow(clippy::too_many_arguments)]
+    fn apply_channel(
+        &self,
+        data: &mut [u8],
+        stride: usize,
+        offset: usize,
+        step: usize,
+        x0: usize,
+        y0: usize,
+        size: usize,
+        channel: usize,
+        fade: &Fade,
+        subsample: usize,
+    ) {
+        let res = self.res;
+        let scale = res as f32 / size as f32;
+        // Bilinear taps along one axis: low index and weight of the high one.
+        let taps: Vec<(usize, f32)> = (0..size)
+            .map(|i| {
+                let p = ((i as f32 + 0.5) * scale - 0.5).clamp(0.0, (res - 1) as f32);
+                let lo = (p.floor() as usize).min(res.saturating_sub(2));
+                (lo, p - lo as f32)
+            })
+            .collect();
+        let (base, input, gain) = (&self.base[channel], &self.input[channel], &self.gain);
+        let sample = |map: &[f32], (ly, ty): (usize, f32), (lx, tx): (usize, f32)| {
+            let a = map[ly * res + lx];
+            let b = map[ly * res + lx + 1];
+            let c = map[(ly + 1) * res + lx];
+            let d = map[(ly + 1) * res + lx + 1];
+            (a + (b - a) * tx) * (1.0 - ty) + (c + (d - c) * tx) * ty
+        };
+        for (j, &ty) in taps.iter().enumerate() {
+            let row = (y0 + j) * stride + offset;
+            let wy = fade.weight_y((y0 + j) * subsample);
+            for (i, &tx) in taps.iter().enumerate() {
+                let w = wy * fade.weight_x((x0 + i) * subsample);
+                if w <= 0.0 {
+                    continue;
+                }
+                let at = row + (x0 + i) * step;
+                let v = data[at] as f32;
+                let relit =
+                    sample(base, ty, tx) + sample(gain, ty, tx) * (v - sample(input, ty, tx));
+                data[at] = (v + w * (relit - v)).round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+}
+
+/// Weight of the lighting change by distance to the crop's inner edges.
+struct Fade {
+    crop: Crop,
+    feather: f32,
+    /// Which crop edges lie inside the frame: left, right, top, bottom.
+    inner: [bool; 4],
+}
+
+impl Fade {
+    fn new(crop: Crop, width: usize, height: usize, feather: usize) -> Fade {
+        Fade {
+            crop,
+            feather: feather as f32,
+            inner: [
+                crop.x > 0,
+                crop.x + crop.size < width,
+                crop.y > 0,
+                crop.y + crop.size < height,
+            ],
+        }
+    }
+
+    fn ramp(&self, from_low: f32, from_high: f32, low_inner: bool, high_inner: bool) -> f32 {
+        if self.feather <= 0.0 {
+            return 1.0;
+        }
+        let mut w: f32 = 1.0;
+        if low_inner {
+            w = w.min(from_low / self.feather);
+        }
+        if high_inner {
+            w = w.min(from_high / self.feather);
+        }
+        w.clamp(0.0, 1.0)
+    }
+
+    /// `x` in frame pixels.
+    fn weight_x(&self, x: usize) -> f32 {
+        let from_left = x as f32 - self.crop.x as f32 + 0.5;
+        let from_right = (self.crop.x + self.crop.size) as f32 - x as f32 - 0.5;
+        self.ramp(from_left, from_right, self.inner[0], self.inner[1])
+    }
+
+    fn weight_y(&self, y: usize) -> f32 {
+        let from_top = y as f32 - self.crop.y as f32 + 0.5;
+        let from_bottom = (self.crop.y + self.crop.size) as f32 - y as f32 - 0.5;
+        self.ramp(from_top, from_bottom, self.inner[2], self.inner[3])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn rgb_frame(w: usize, h: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> Vec<u8> {
+        let mut v = vec![0u8; w * h * 3];
+        for y in 0..h {
+            for x in 0..w {
+                v[(y * w + x) * 3..(y * w + x) * 3 + 3].copy_from_slice(&f(x, y));
+            }
+        }
+        v
+    }
+
+    fn view(data: &[u8], w: usize, h: usize) -> Frame<'_> {
+        let p = Plane {
+            data,
+            stride: w * 3,
+        };
+        Frame {
+            format: PixelFormat::Rgb,
+            width: w,
+            height: h,
+            planes: [p, p, p],
+            matrix: YuvMatrix::BT601_LIMITED,
+        }
+    }
+
+    #[test]
+    fn yuv_matrix_round_trips() {
+        for m in [YuvMatrix::BT601_LIMITED, YuvMatrix::BT709_LIMITED] {
+            for rgb in [
+                [0.0, 0.0, 0.0],
+                [1.0, 1.0, 1.0],
+                [0.8, 0.3, 0.1],
+                [0.1, 0.9, 0.4],
+            ] {
+                let yuv = m.from_rgb(rgb);
+                let back = m.to_rgb(yuv[0], yuv[1], yuv[2]);
+                for c in 0..3 {
+                    assert!((back[c] - rgb[c]).abs() < 1e-5);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn crop_is_centred_even_and_inside() {
+        let c = Crop::centred(1280, 720, 0.5, 0.5, 1.0);
+        assert_eq!(
+            c,
+            Crop {
+                x: 280,
+                y: 0,
+                size: 720
+            }
+        );
+        let c = Crop::centred(640, 480, 0.95, 0.5, 0.5);
+        assert!(c.x + c.size <= 640 && c.x.is_multiple_of(2) && c.size.is_multiple_of(2));
+    }
+
+    #[test]
+    fn area_resample_of_a_uniform_crop_is_uniform() {
+        let data = rgb_frame(100, 80, |_, _| [200, 100, 50]);
+        let out = sample_crop(
+            &view(&data, 100, 80),
+            Crop {
+                x: 10,
+                y: 4,
+                size: 70,
+            },
+            32,
+        );
+        let n = 32 * 32;
+        assert!(out[..n].iter().all(|v| (v - 200.0 / 255.0).abs() < 1e-5));
+        assert!(out[2 * n..].iter().all(|v| (v - 50.0 / 255.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn identity_change_keeps_the_frame() {
+        let mut data = rgb_frame(64, 64, |x, y| {
+            [(x * 4) as u8, (y * 4) as u8, ((x + y) * 2) as u8]
+        });
+        let before = data.clone();
+        let crop = Crop {
+            x: 0,
+            y: 0,
+            size: 64,
+        };
+        let input = sample_crop(&view(&data, 64, 64), crop, 16);
+        let change = LightingChange::new(
+            &input,
+            &input,
+            16,
+            PixelFormat::Rgb,
+            YuvMatrix::BT601_LIMITED,
+        );
+        let mut fm = FrameMut {
+            format: PixelFormat::Rgb,
+            width: 64,
+            height: 64,
+            planes: [(&mut data, 192), (&mut [], 0), (&mut [], 0)],
+            matrix: YuvMatrix::BT601_LIMITED,
+        };
+        change.apply(&mut fm, crop, 0);
+        assert_eq!(data, before);
+    }
+}

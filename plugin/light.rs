@@ -1,0 +1,201 @@
+//! Monitor light: a monitor frame reduced to the network's light image.
+//!
+//! The model contract (`models/CONTRACT.md`) defines it: the frame as shown,
+//! 8-bit sRGB decoded to linear light, box-averaged with area weights over
+//! 16 rows × 32 columns; row 0 is the top of the screen, column 0 its left
+//! edge as the user sees it. Python computes the same in
+//! `train/lsyd/contract.py::light_from_frames`.
+
+use crate::frame::{AreaWeights, Frame, PixelFormat};
+
+pub const LIGHT_ROWS: usize = 16;
+pub const LIGHT_COLS: usize = 32;
+pub const LIGHT_LEN: usize = 3 * LIGHT_ROWS * LIGHT_COLS;
+
+/// A light image: planar linear RGB, 3 × 16 × 32, values in [0, 1].
+#[derive(Clone, Debug, PartialEq)]
+pub struct Light(pub Vec<f32>);
+
+/// Resolution of the table that decodes sRGB values that are not whole bytes (from YUV).
+const DECODE_STEPS: usize = 4096;
+
+fn srgb_to_linear(v: f32) -> f32 {
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+struct Decode {
+    bytes: [f32; 256],
+    fine: Vec<f32>,
+}
+
+fn decode_tables() -> &'static Decode {
+    static TABLES: std::sync::OnceLock<Decode> = std::sync::OnceLock::new();
+    TABLES.get_or_init(|| Decode {
+        bytes: std::array::from_fn(|i| srgb_to_linear(i as f32 / 255.0)),
+        fine: (0..=DECODE_STEPS)
+            .map(|i| srgb_to_linear(i as f32 / DECODE_STEPS as f32))
+            .collect(),
+    })
+}
+
+impl Light {
+    pub fn uniform(value: [f32; 3]) -> Light {
+        let n = LIGHT_ROWS * LIGHT_COLS;
+        Light(
+            (0..3)
+                .flat_map(|c| std::iter::repeat_n(value[c], n))
+                .collect(),
+        )
+    }
+
+    /// The light of a monitor frame of any supported format and size.
+    pub fn from_frame(frame: &Frame) -> Light {
+        let t = decode_tables();
+        let wx = AreaWeights::new(frame.width, LIGHT_COLS);
+        let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
+        // Which output column each input column feeds, with which weight (at most two).
+        let mut col_taps: Vec<[(usize, f32); 2]> = vec![[(0, 0.0); 2]; frame.width];
+        for (o, (s, w)) in wx.start.iter().zip(&wx.weights).enumerate() {
+            for (k, wk) in w.iter().enumerate() {
+                let slot = &mut col_taps[s + k];
+                let i = if slot[0].1 == 0.0 { 0 } else { 1 };
+                slot[i] = (o, *wk);
+            }
+        }
+        let mut rows = vec![[0f32; 3 * LIGHT_COLS]; frame.height];
+        let mut linear = vec![[0f32; 3]; frame.width];
+        for (y, acc) in rows.iter_mut().enumerate() {
+            decode_row(frame, y, t, &mut linear);
+            for (x, rgb) in linear.iter().enumerate() {
+                for &(o, w) in &col_taps[x] {
+                    for c in 0..3 {
+                        acc[c * LIGHT_COLS + o] += w * rgb[c];
+                    }
+                }
+            }
+        }
+        let mut out = vec![0f32; LIGHT_LEN];
+        for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
+            for (k, wk) in w.iter().enumerate() {
+                for c in 0..3 {
+                    for col in 0..LIGHT_COLS {
+                        out[(c * LIGHT_ROWS + r) * LIGHT_COLS + col] +=
+                            wk * rows[s + k][c * LIGHT_COLS + col];
+                    }
+                }
+            }
+        }
+        Light(out)
+    }
+
+    /// Mean absolute difference to another light.
+    pub fn distance(&self, other: &Light) -> f32 {
+        self.0
+            .iter()
+            .zip(&other.0)
+            .map(|(a, b)| (a - b).abs())
+            .sum::<f32>()
+            / LIGHT_LEN as f32
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.0.iter().all(|v| v.is_finite())
+    }
+}
+
+/// Linear RGB of every pixel of row `y`.
+fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
+    let fine = |v: f32| t.fine[(v.clamp(0.0, 1.0) * DECODE_STEPS as f32).round() as usize];
+    let p0 = &frame.planes[0];
+    match frame.format {
+        PixelFormat::I420 | PixelFormat::Nv12 => {
+            let yrow = &p0.data[y * p0.stride..];
+            let (p1, p2) = (&frame.planes[1], &frame.planes[2]);
+            for (x, o) in out.iter_mut().enumerate() {
+                let (cb, cr) = if frame.format == PixelFormat::I420 {
+                    (
+                        p1.data[(y / 2) * p1.stride + x / 2],
+                        p2.data[(y / 2) * p2.stride + x / 2],
+                    )
+                } else {
+                    let i = (y / 2) * p1.stride + (x / 2) * 2;
+                    (p1.data[i], p1.data[i + 1])
+                };
+                let rgb = frame.matrix.to_rgb(yrow[x] as f32, cb as f32, cr as f32);
+                *o = rgb.map(fine);
+            }
+        }
+        format => {
+            let (offsets, bpp) = match format {
+                PixelFormat::Rgba | PixelFormat::Rgbx => ([0, 1, 2], 4),
+                PixelFormat::Bgra | PixelFormat::Bgrx => ([2, 1, 0], 4),
+                PixelFormat::Rgb => ([0, 1, 2], 3),
+                _ => ([2, 1, 0], 3),
+            };
+            let row = &p0.data[y * p0.stride..];
+            for (x, o) in out.iter_mut().enumerate() {
+                *o = offsets.map(|off| t.bytes[row[x * bpp + off] as usize]);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{Plane, YuvMatrix};
+
+    fn rgb_frame(data: &[u8], w: usize, h: usize) -> Frame<'_> {
+        let p = Plane {
+            data,
+            stride: w * 3,
+        };
+        Frame {
+            format: PixelFormat::Rgb,
+            width: w,
+            height: h,
+            planes: [p, p, p],
+            matrix: YuvMatrix::BT601_LIMITED,
+        }
+    }
+
+    #[test]
+    fn white_frame_is_unit_light() {
+        let data = vec![255u8; 100 * 50 * 3];
+        let l = Light::from_frame(&rgb_frame(&data, 100, 50));
+        assert!(l.0.iter().all(|v| (v - 1.0).abs() < 1e-5));
+    }
+
+    #[test]
+    fn screen_left_is_column_zero_and_top_is_row_zero() {
+        let (w, h) = (64, 32);
+        let mut data = vec![0u8; w * h * 3];
+        for y in 0..h / 2 {
+            for x in 0..w / 2 {
+                data[(y * w + x) * 3] = 255;
+            }
+        }
+        let l = Light::from_frame(&rgb_frame(&data, w, h));
+        let red = |r: usize, c: usize| l.0[r * LIGHT_COLS + c];
+        assert!((red(0, 0) - 1.0).abs() < 1e-5);
+        assert!(red(LIGHT_ROWS - 1, LIGHT_COLS - 1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn fractional_cells_average_by_area() {
+        // 48 columns into 32 cells: each cell covers 1.5 columns.
+        let (w, h) = (48, 16);
+        let mut data = vec![0u8; w * h * 3];
+        for y in 0..h {
+            data[(y * w) * 3 + 1] = 255; // column 0 green
+        }
+        let l = Light::from_frame(&rgb_frame(&data, w, h));
+        let green = |c: usize| l.0[LIGHT_ROWS * LIGHT_COLS + c];
+        assert!((green(0) - 1.0 / 1.5).abs() < 1e-5, "{}", green(0));
+        assert!(green(1).abs() < 1e-6);
+    }
+}

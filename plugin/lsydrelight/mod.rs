@@ -1,0 +1,80 @@
+//! # lsydrelight
+//!
+//! Relights the face in a video to a target monitor light, with a network
+//! personalised to the person ("Personalized Video Relighting With an
+//! At-Home Light Stage", Choi, Christman, Sengupta, ECCV 2024).
+//!
+//! Pads:
+//! - `sink`: the face video (I420, NV12, RGBA, BGRA, RGBx, BGRx, RGB, BGR; any size and rate).
+//! - `monitor_sink` (request): what the monitor showed, e.g. a screen capture, any size and rate.
+//!   Each face frame uses the monitor frame shown at its running time minus `monitor-offset`.
+//!   Without this pad, or while the monitor stream is stalled or over, the source light is
+//!   predicted from the face (unknown-source mode).
+//! - `src`: the relit video, in the face video's caps. A frame relit with the monitor's
+//!   light carries a `GstReferenceTimestampMeta` with caps `timestamp/x-lsydrelight-monitor`
+//!   holding that monitor frame's running time.
+//! - `monitor_src`: the predicted source monitor light as a small RGB video at the face
+//!   frame rate; computed only while linked.
+//!
+//! The source light is averaged over the last `average-frames` frames with weights
+//! `beta`^i, and the de-lit features are smoothed with `alpha` (the paper's section 3.3).
+//!
+//! ## Example pipelines
+//!
+//! Relight a recorded call (face video and screen recording) offline:
+//!
+//! ```text
+//! gst-launch-1.0 lsydrelight name=r target-location=models/targets/sunset.png \
+//!     filesrc location=face.y4m ! y4mdec ! r.sink \
+//!     filesrc location=monitor.y4m ! y4mdec ! r.monitor_sink \
+//!     r.src ! videoconvert ! x264enc ! mp4mux ! filesink location=relit.mp4
+//! ```
+//!
+//! A webcam with the screen it faces, live, plus the predicted monitor:
+//!
+//! ```text
+//! gst-launch-1.0 lsydrelight name=r \
+//!     v4l2src ! videoconvert ! r.sink \
+//!     ximagesrc use-damage=false ! video/x-raw,framerate=10/1 ! videoconvert ! r.monitor_sink \
+//!     r.src ! queue ! autovideosink \
+//!     r.monitor_src ! queue ! videoscale ! autovideosink
+//! ```
+//!
+//! A webcam alone (the source light is predicted), to a virtual camera for OBS or calls:
+//!
+//! ```text
+//! gst-launch-1.0 v4l2src ! videoconvert ! lsydrelight ! videoconvert ! v4l2sink device=/dev/video10
+//! ```
+
+use gst::glib;
+use gst::prelude::*;
+
+mod imp;
+
+pub use imp::MONITOR_TIMESTAMP_CAPS;
+
+glib::wrapper! {
+    pub struct LsydRelight(ObjectSubclass<imp::LsydRelight>) @extends gst_base::Aggregator, gst::Element, gst::Object;
+}
+
+/// Where the network runs.
+#[derive(Debug, Eq, PartialEq, Ord, PartialOrd, Hash, Clone, Copy, Default, glib::Enum)]
+#[repr(u32)]
+#[enum_type(name = "GstLsydRelightExecutionProvider")]
+pub enum ExecutionProvider {
+    #[default]
+    #[enum_value(name = "CPU", nick = "cpu")]
+    Cpu = 0,
+    #[enum_value(name = "CUDA (needs an ONNX Runtime built with CUDA)", nick = "cuda")]
+    Cuda = 1,
+}
+
+pub fn register(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {
+    ExecutionProvider::static_type().mark_as_plugin_api(gst::PluginAPIFlags::empty());
+    gst::Element::register(
+        Some(plugin),
+        "lsydrelight",
+        gst::Rank::NONE,
+        LsydRelight::static_type(),
+    )
+}

@@ -1,0 +1,708 @@
+//! Datasets and recordings: what the trainer reads and the tests replay.
+//!
+//! - Training captures have the form a real LSYD capture has: face frames,
+//!   the monitor frames shown at the same times, timestamps, and 2D facial
+//!   keypoints. `truth.npy` holds the simulator's true pose and expression,
+//!   for measuring keypoint pairing; training never reads it.
+//! - Paired ground truth: the same pose and expression under several lights.
+//! - The held-out set: 9 pose-expression combinations under 9 monitor
+//!   lights, 36 source-target pairs per pose, 324 in all.
+//! - Test recordings: a face video and its monitor video as ordinary `.y4m`
+//!   files, with the exact ground truth of the video relit to target lights.
+//!
+//! Every output is a pure function of its seeds.
+
+use std::fs;
+use std::io;
+use std::path::Path;
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::content::{self, Clip, FRAME_HEIGHT, FRAME_WIDTH, Playlist, Style};
+use crate::material::{Ambient, AmbientKind, Look, NEUTRAL};
+use crate::math::Vec3;
+use crate::mesh::landmarks_3d;
+use crate::monitor::{CellLight, RgbImage};
+use crate::motion::{Range, Trajectory};
+use crate::render::{Renderer, Scene, Sensor};
+use crate::rng::{Rng, hash, label};
+use crate::subject::{Expression, Pose, State, Subject};
+
+/// Side of the square head-and-shoulders frames of captures and the held-out set.
+pub const CAPTURE_SIZE: usize = 256;
+/// Number of facial keypoints (the iBUG 68-point layout).
+pub const KEYPOINTS: usize = 68;
+/// Values per row of `truth.npy`.
+pub const TRUTH_FIELDS: [&str; 10] = [
+    "yaw_deg",
+    "pitch_deg",
+    "roll_deg",
+    "tx_m",
+    "ty_m",
+    "tz_m",
+    "mouth_open",
+    "smile",
+    "blink",
+    "present",
+];
+
+fn truth_row(s: &State) -> [f32; 10] {
+    let p = &s.pose;
+    let e = &s.expression;
+    [
+        p.yaw.to_degrees(),
+        p.pitch.to_degrees(),
+        p.roll.to_degrees(),
+        p.translation.x,
+        p.translation.y,
+        p.translation.z,
+        e.mouth_open,
+        e.smile,
+        e.blink,
+        p.present as u8 as f32,
+    ]
+}
+
+/// Image coordinates of the 68 keypoints, NaN when the person is not in view.
+pub fn keypoints(r: &Renderer, state: &State) -> Vec<[f32; 2]> {
+    match landmarks_3d(&r.scene.subject, state) {
+        Some(pts) => pts
+            .iter()
+            .map(|p| {
+                let (x, y, _) = r.scene.camera.project(*p);
+                [x, y]
+            })
+            .collect(),
+        None => vec![[f32::NAN; 2]; KEYPOINTS],
+    }
+}
+
+/// The monitor's cell light for a frame it shows.
+pub fn light_of(r: &Renderer, frame: &RgbImage) -> CellLight {
+    CellLight::from_frame(frame, r.scene.monitor.rows, r.scene.monitor.cols)
+}
+
+fn write_json(path: &Path, value: &impl Serialize) -> io::Result<()> {
+    fs::write(
+        path,
+        serde_json::to_string_pretty(value).map_err(io::Error::other)? + "\n",
+    )
+}
+
+/// Settings of the training captures.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CaptureSpec {
+    pub subject_seed: u64,
+    pub seed: u64,
+    pub sessions: usize,
+    pub seconds: f64,
+    /// Frames kept per second of capture.
+    pub fps: f64,
+    pub size: usize,
+}
+
+impl Default for CaptureSpec {
+    fn default() -> Self {
+        CaptureSpec {
+            subject_seed: crate::subject::DEFAULT_SUBJECT_SEED,
+            seed: 1,
+            sessions: 16,
+            seconds: 60.0,
+            fps: 10.0,
+            size: CAPTURE_SIZE,
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct CaptureMeta<'a> {
+    kind: &'static str,
+    spec: &'a CaptureSpec,
+    session: usize,
+    frames: usize,
+    outfit: String,
+    ambient: String,
+    keypoint_layout: &'static str,
+    truth_fields: [&'static str; 10],
+    monitor_frame: [usize; 2],
+}
+
+/// Writes one capture session: `face.npy`, `monitor.npy`, `timestamps.npy`,
+/// `keypoints.npy`, `truth.npy` and `meta.json` in `dir`.
+pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let r = Renderer::new(Scene::new(
+        Subject::from_seed(spec.subject_seed),
+        spec.size,
+        spec.size,
+    ))
+    .map_err(io::Error::other)?;
+    let domain = format!("train-{session}");
+    let look = Look::random(spec.seed, &domain);
+    let motion = Trajectory::random(
+        spec.seed,
+        &format!("{domain}-motion"),
+        spec.seconds,
+        Range::CAPTURE,
+        0.6,
+    );
+    let playlist = Playlist::random(
+        spec.seed,
+        &format!("{domain}-monitor"),
+        spec.seconds,
+        Style::Capture,
+    );
+    let frames = (spec.seconds * spec.fps).round() as usize;
+    let sensor = Sensor::default();
+    let noise_seed = hash(spec.seed, &[label(&domain)]);
+
+    let s = spec.size;
+    let mut face = crate::io::NpyWriter::<u8>::create(&dir.join("face.npy"), &[frames, s, s, 3])?;
+    let mut monitor = crate::io::NpyWriter::<u8>::create(
+        &dir.join("monitor.npy"),
+        &[frames, FRAME_HEIGHT, FRAME_WIDTH, 3],
+    )?;
+    let mut times = Vec::with_capacity(frames);
+    let mut kps = Vec::with_capacity(frames * KEYPOINTS * 2);
+    let mut truth = Vec::with_capacity(frames * 10);
+    for i in 0..frames {
+        let t = i as f64 / spec.fps;
+        let state = motion.state(t);
+        let shown = playlist.frame(t);
+        let transport = r.prepare(&look, &state);
+        let img = r.render(&transport, &[&light_of(&r, &shown)]).remove(0);
+        face.append(&sensor.capture(&img, noise_seed, i as u64).data)?;
+        monitor.append(&shown.data)?;
+        times.push(t);
+        kps.extend(keypoints(&r, &state).into_iter().flatten());
+        truth.extend(truth_row(&state));
+    }
+    face.finish()?;
+    monitor.finish()?;
+    crate::io::write_npy(&dir.join("timestamps.npy"), &[frames], &times)?;
+    crate::io::write_npy(&dir.join("keypoints.npy"), &[frames, KEYPOINTS, 2], &kps)?;
+    crate::io::write_npy(&dir.join("truth.npy"), &[frames, 10], &truth)?;
+    write_json(
+        &dir.join("meta.json"),
+        &CaptureMeta {
+            kind: "capture",
+            spec,
+            session,
+            frames,
+            outfit: format!("{:?}", look.outfit),
+            ambient: format!("{:?}", look.ambient),
+            keypoint_layout: "iBUG 300-W 68 points, image pixels (x, y), NaN when nobody is in view",
+            truth_fields: TRUTH_FIELDS,
+            monitor_frame: [FRAME_HEIGHT, FRAME_WIDTH],
+        },
+    )
+}
+
+/// Writes `poses` poses from training-like motion, each under `lights` monitor
+/// lights: `face.npy` (poses, lights, S, S, 3), `monitor.npy`, `keypoints.npy`, `truth.npy`.
+pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let r = Renderer::new(Scene::new(
+        Subject::from_seed(spec.subject_seed),
+        spec.size,
+        spec.size,
+    ))
+    .map_err(io::Error::other)?;
+    let s = spec.size;
+    let sensor = Sensor::default();
+    let mut face =
+        crate::io::NpyWriter::<u8>::create(&dir.join("face.npy"), &[poses, lights, s, s, 3])?;
+    let mut monitor = crate::io::NpyWriter::<u8>::create(
+        &dir.join("monitor.npy"),
+        &[poses, lights, FRAME_HEIGHT, FRAME_WIDTH, 3],
+    )?;
+    let mut kps = Vec::new();
+    let mut truth = Vec::new();
+    let motion = Trajectory::random(
+        spec.seed,
+        "paired-motion",
+        poses as f64 * 0.7 + 1.0,
+        Range::CAPTURE,
+        0.0,
+    );
+    let mut rng = Rng::stream(spec.seed, "paired-lights");
+    for i in 0..poses {
+        let state = motion.state(i as f64 * 0.7);
+        let look = Look::random(spec.seed, &format!("paired-{}", i % 8));
+        let shown: Vec<RgbImage> = (0..lights)
+            .map(|_| Playlist::still(Clip::random(&mut rng)).frame(0.0))
+            .collect();
+        let cells: Vec<CellLight> = shown.iter().map(|f| light_of(&r, f)).collect();
+        let refs: Vec<&CellLight> = cells.iter().collect();
+        let transport = r.prepare(&look, &state);
+        for (m, img) in r.render(&transport, &refs).iter().enumerate() {
+            face.append(
+                &sensor
+                    .capture(
+                        img,
+                        hash(spec.seed, &[label("paired")]),
+                        (i * lights + m) as u64,
+                    )
+                    .data,
+            )?;
+            monitor.append(&shown[m].data)?;
+        }
+        kps.extend(keypoints(&r, &state).into_iter().flatten());
+        truth.extend(truth_row(&state));
+    }
+    face.finish()?;
+    monitor.finish()?;
+    crate::io::write_npy(&dir.join("keypoints.npy"), &[poses, KEYPOINTS, 2], &kps)?;
+    crate::io::write_npy(&dir.join("truth.npy"), &[poses, 10], &truth)
+}
+
+/// The nine held-out pose-expression combinations. None lies on a training
+/// trajectory: they are fixed here, not drawn from the training streams.
+pub fn heldout_states() -> Vec<State> {
+    let pose = |yaw: f32, pitch: f32, roll: f32, t: (f32, f32, f32)| Pose {
+        yaw: yaw.to_radians(),
+        pitch: pitch.to_radians(),
+        roll: roll.to_radians(),
+        translation: Vec3::new(t.0, t.1, t.2),
+        present: true,
+    };
+    let ex = |mouth_open: f32, smile: f32, blink: f32| Expression {
+        mouth_open,
+        smile,
+        blink,
+    };
+    vec![
+        State {
+            pose: pose(0.0, 0.0, 0.0, (0.0, 0.0, 0.0)),
+            expression: ex(0.0, 0.0, 0.0),
+        },
+        State {
+            pose: pose(22.0, 3.0, 2.0, (0.01, 0.0, 0.02)),
+            expression: ex(0.0, 0.6, 0.0),
+        },
+        State {
+            pose: pose(-24.0, -4.0, -3.0, (-0.015, 0.01, -0.03)),
+            expression: ex(0.5, 0.0, 0.0),
+        },
+        State {
+            pose: pose(5.0, 11.0, 0.0, (0.0, -0.015, 0.04)),
+            expression: ex(0.2, 0.3, 0.0),
+        },
+        State {
+            pose: pose(-8.0, -12.0, 4.0, (0.02, 0.02, 0.0)),
+            expression: ex(0.0, 0.0, 0.0),
+        },
+        State {
+            pose: pose(14.0, -6.0, -6.0, (-0.02, 0.0, 0.06)),
+            expression: ex(0.7, 0.2, 0.0),
+        },
+        State {
+            pose: pose(-16.0, 8.0, 6.0, (0.0, -0.02, -0.06)),
+            expression: ex(0.0, 0.9, 0.0),
+        },
+        State {
+            pose: pose(28.0, -2.0, 1.0, (0.03, 0.01, 0.01)),
+            expression: ex(0.3, 0.0, 0.0),
+        },
+        State {
+            pose: pose(-3.0, 4.0, -7.0, (-0.03, -0.01, 0.03)),
+            expression: ex(0.0, 0.0, 0.0),
+        },
+    ]
+}
+
+/// The held-out set's room and outfit: a capture the model never saw.
+pub fn heldout_look() -> Look {
+    let mut look = Look::random(11, "heldout-look");
+    look.ambient = Ambient {
+        kind: AmbientKind::Ceiling,
+        tint: NEUTRAL,
+        ratio: 0.18,
+    };
+    look
+}
+
+/// Writes the held-out set: `images.npy` (9 poses, 9 lights, S, S, 3) as the
+/// webcam records them, `clean.npy` the same without sensor noise (exact
+/// ground truth), `monitor.npy` (9, H, W, 3), `keypoints.npy` and `truth.npy`.
+pub fn write_heldout(dir: &Path, subject_seed: u64, size: usize) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), size, size))
+        .map_err(io::Error::other)?;
+    let clips = content::heldout_clips(subject_seed);
+    let shown: Vec<RgbImage> = clips
+        .iter()
+        .map(|c| Playlist::still(c.clone()).frame(0.0))
+        .collect();
+    let cells: Vec<CellLight> = shown.iter().map(|f| light_of(&r, f)).collect();
+    let refs: Vec<&CellLight> = cells.iter().collect();
+    let states = heldout_states();
+    let (np, nl) = (states.len(), refs.len());
+    let look = heldout_look();
+    let sensor = Sensor::default();
+    let mut noisy =
+        crate::io::NpyWriter::<u8>::create(&dir.join("images.npy"), &[np, nl, size, size, 3])?;
+    let mut clean =
+        crate::io::NpyWriter::<u8>::create(&dir.join("clean.npy"), &[np, nl, size, size, 3])?;
+    let mut kps = Vec::new();
+    let mut truth = Vec::new();
+    for (p, state) in states.iter().enumerate() {
+        let transport = r.prepare(&look, state);
+        for (l, img) in r.render(&transport, &refs).iter().enumerate() {
+            noisy.append(
+                &sensor
+                    .capture(
+                        img,
+                        hash(subject_seed, &[label("heldout")]),
+                        (p * nl + l) as u64,
+                    )
+                    .data,
+            )?;
+            clean.append(&sensor.clean(img).data)?;
+        }
+        kps.extend(keypoints(&r, state).into_iter().flatten());
+        truth.extend(truth_row(state));
+    }
+    noisy.finish()?;
+    clean.finish()?;
+    let mut mon = Vec::with_capacity(nl * FRAME_WIDTH * FRAME_HEIGHT * 3);
+    for f in &shown {
+        mon.extend_from_slice(&f.data);
+    }
+    crate::io::write_npy(
+        &dir.join("monitor.npy"),
+        &[nl, FRAME_HEIGHT, FRAME_WIDTH, 3],
+        &mon,
+    )?;
+    crate::io::write_npy(&dir.join("keypoints.npy"), &[np, KEYPOINTS, 2], &kps)?;
+    crate::io::write_npy(&dir.join("truth.npy"), &[np, 10], &truth)?;
+    write_json(
+        &dir.join("meta.json"),
+        &serde_json::json!({
+            "kind": "heldout",
+            "subject_seed": subject_seed,
+            "poses": np,
+            "lights": nl,
+            "pairs": np * nl * (nl - 1) / 2,
+            "size": size,
+            "images": "webcam frames (sensor noise), the inputs",
+            "clean": "the same frames without sensor noise: exact ground truth",
+            "truth_fields": TRUTH_FIELDS,
+        }),
+    )
+}
+
+/// What a test recording shows, and how it is filmed.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RecordingSpec {
+    pub name: String,
+    pub subject_seed: u64,
+    pub seed: u64,
+    pub frames: usize,
+    pub fps: u32,
+    pub width: usize,
+    pub height: usize,
+    /// Monitor content: steady, slowly changing or with scene cuts.
+    pub style: String,
+    /// Seconds (start, end) during which the person is away.
+    pub away: Option<(f64, f64)>,
+    /// Seconds between the monitor showing a frame and its light reaching the
+    /// recorded face (display plus camera latency).
+    pub display_latency: f64,
+}
+
+impl RecordingSpec {
+    /// The standard recordings: `steady`, `slow`, `cuts`, `walkaway`, and `call`,
+    /// the mixed one the demo relights. 300 frames at 30 fps, 480×360.
+    pub fn standard(name: &str) -> Option<RecordingSpec> {
+        let (style, away) = match name {
+            "steady" => ("steady", None),
+            "slow" => ("slow", None),
+            "cuts" => ("cuts", None),
+            "walkaway" => ("capture", Some((4.0, 6.5))),
+            "call" => ("capture", Some((7.5, 8.5))),
+            _ => return None,
+        };
+        Some(RecordingSpec {
+            name: name.into(),
+            subject_seed: crate::subject::DEFAULT_SUBJECT_SEED,
+            seed: label(name),
+            frames: 300,
+            fps: 30,
+            width: 480,
+            height: 360,
+            style: style.into(),
+            away,
+            display_latency: 0.0,
+        })
+    }
+
+    pub const STANDARD: [&'static str; 5] = ["steady", "slow", "cuts", "walkaway", "call"];
+
+    fn style(&self) -> Style {
+        match self.style.as_str() {
+            "steady" => Style::Steady,
+            "slow" => Style::Slow,
+            "cuts" => Style::Cuts,
+            _ => Style::Capture,
+        }
+    }
+}
+
+/// One frame of a recording with everything known about it.
+pub struct RecordedFrame {
+    pub time: f64,
+    pub state: State,
+    /// What the webcam recorded (with sensor noise).
+    pub face: RgbImage,
+    /// What the monitor showed at this time (the screen capture's frame).
+    pub monitor: RgbImage,
+    /// The exact, noiseless frame relit to each target light, in target order.
+    pub ground_truth: Vec<RgbImage>,
+}
+
+/// A test recording, rendered on demand.
+pub struct Recording {
+    pub spec: RecordingSpec,
+    renderer: Renderer,
+    look: Look,
+    motion: Trajectory,
+    playlist: Playlist,
+    /// Target lights: name, the monitor frame that defines it, its cells.
+    pub targets: Vec<(String, RgbImage, CellLight)>,
+}
+
+impl Recording {
+    pub fn new(spec: RecordingSpec) -> Result<Recording, String> {
+        let renderer = Renderer::new(Scene::new(
+            Subject::from_seed(spec.subject_seed),
+            spec.width,
+            spec.height,
+        ))?;
+        let seconds = spec.frames as f64 / spec.fps as f64;
+        let mut motion = Trajectory::random(
+            spec.seed,
+            "recording-motion",
+            seconds + 1.0,
+            Range::CALL,
+            0.4,
+        );
+        if let Some((a, b)) = spec.away {
+            motion = motion.with_absence(a, b);
+        }
+        let playlist =
+            Playlist::random(spec.seed, "recording-monitor", seconds + 1.0, spec.style());
+        let targets = content::target_clips()
+            .into_iter()
+            .map(|(name, clip)| {
+                let frame = Playlist::still(clip).frame(0.0);
+                let cells = light_of(&renderer, &frame);
+                (name.to_string(), frame, cells)
+            })
+            .collect();
+        Ok(Recording {
+            look: Look::random(spec.seed, "recording-look"),
+            spec,
+            renderer,
+            motion,
+            playlist,
+            targets,
+        })
+    }
+
+    pub fn standard(name: &str) -> Option<Recording> {
+        RecordingSpec::standard(name).and_then(|s| Recording::new(s).ok())
+    }
+
+    pub fn time(&self, frame: usize) -> f64 {
+        frame as f64 / self.spec.fps as f64
+    }
+
+    /// The monitor frame shown at time `t`.
+    pub fn monitor_frame(&self, t: f64) -> RgbImage {
+        self.playlist.frame(t)
+    }
+
+    /// True when the monitor content cuts between frames `i - 1` and `i`.
+    pub fn cut_before(&self, i: usize) -> bool {
+        i > 0 && self.playlist.cut_between(self.time(i - 1), self.time(i))
+    }
+
+    pub fn renderer(&self) -> &Renderer {
+        &self.renderer
+    }
+
+    /// Renders frame `i`: the recorded face, the monitor frame, and ground truth
+    /// for the targets (all of them when `with_truth`, none otherwise).
+    pub fn frame(&self, i: usize, with_truth: bool) -> RecordedFrame {
+        let t = self.time(i);
+        let state = self.motion.state(t);
+        let monitor = self.monitor_frame(t);
+        let lit_by = self.monitor_frame((t - self.spec.display_latency).max(0.0));
+        let source = light_of(&self.renderer, &lit_by);
+        let mut lights = vec![&source];
+        if with_truth {
+            lights.extend(self.targets.iter().map(|(_, _, c)| c));
+        }
+        let transport = self.renderer.prepare(&self.look, &state);
+        let mut imgs = self.renderer.render(&transport, &lights).into_iter();
+        let sensor = Sensor::default();
+        let face = sensor.capture(&imgs.next().unwrap(), self.spec.seed, i as u64);
+        RecordedFrame {
+            time: t,
+            state,
+            face,
+            monitor,
+            ground_truth: imgs.map(|img| sensor.clean(&img)).collect(),
+        }
+    }
+
+    /// Writes `face.y4m` (4:2:0, as a webcam), `monitor.y4m` (4:4:4, as a
+    /// lossless screen capture), one `truth-<target>.y4m` (4:4:4) per target,
+    /// the target monitor frames as PNG, and `meta.json`.
+    pub fn write(&self, dir: &Path) -> io::Result<()> {
+        use crate::io::{Chroma, Y4mWriter};
+        fs::create_dir_all(dir)?;
+        let s = &self.spec;
+        let mut face = Y4mWriter::create(
+            &dir.join("face.y4m"),
+            s.width,
+            s.height,
+            s.fps,
+            Chroma::C420,
+        )?;
+        let mut monitor = Y4mWriter::create(
+            &dir.join("monitor.y4m"),
+            FRAME_WIDTH,
+            FRAME_HEIGHT,
+            s.fps,
+            Chroma::C444,
+        )?;
+        let mut truth = self
+            .targets
+            .iter()
+            .map(|(name, _, _)| {
+                Y4mWriter::create(
+                    &dir.join(format!("truth-{name}.y4m")),
+                    s.width,
+                    s.height,
+                    s.fps,
+                    Chroma::C444,
+                )
+            })
+            .collect::<io::Result<Vec<_>>>()?;
+        for i in 0..s.frames {
+            let f = self.frame(i, true);
+            face.write(&f.face)?;
+            monitor.write(&f.monitor)?;
+            for (w, gt) in truth.iter_mut().zip(&f.ground_truth) {
+                w.write(gt)?;
+            }
+        }
+        face.finish()?;
+        monitor.finish()?;
+        for w in truth {
+            w.finish()?;
+        }
+        for (name, frame, _) in &self.targets {
+            crate::io::write_png(&dir.join(format!("target-{name}.png")), frame)?;
+        }
+        let cuts: Vec<usize> = (1..s.frames).filter(|&i| self.cut_before(i)).collect();
+        write_json(
+            &dir.join("meta.json"),
+            &serde_json::json!({
+                "kind": "recording",
+                "spec": s,
+                "targets": self.targets.iter().map(|(n, _, _)| n).collect::<Vec<_>>(),
+                "cuts_before_frames": cuts,
+                "colour": "BT.601 limited range; truth files are the exact noiseless frames",
+            }),
+        )
+    }
+}
+
+/// The person under a grid of monitor lights (columns) and poses (rows), for people to look at.
+pub fn contact_sheet(subject_seed: u64, cell: usize) -> Result<RgbImage, String> {
+    let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), cell, cell))?;
+    let mut clips: Vec<Clip> = content::heldout_clips(subject_seed);
+    clips.truncate(6);
+    let shown: Vec<RgbImage> = clips
+        .iter()
+        .map(|c| Playlist::still(c.clone()).frame(0.0))
+        .collect();
+    let cells: Vec<CellLight> = shown.iter().map(|f| light_of(&r, f)).collect();
+    let refs: Vec<&CellLight> = cells.iter().collect();
+    let states: Vec<State> = heldout_states().into_iter().take(4).collect();
+    let look = Look::default();
+    // One extra row on top shows each column's monitor frame.
+    let cols = refs.len();
+    let mut sheet = RgbImage::new(cell * cols, cell * (states.len() + 1));
+    for (c, frame) in shown.iter().enumerate() {
+        let thumb = resize_area(frame, 0, 0, frame.width, frame.height, cell, cell * 9 / 16);
+        paste(&mut sheet, &thumb, c * cell, (cell - thumb.height) / 2);
+    }
+    let rendered: Vec<Vec<RgbImage>> = states
+        .par_iter()
+        .map(|s| {
+            let t = r.prepare(&look, s);
+            r.render(&t, &refs)
+                .iter()
+                .map(|img| Sensor::default().clean(img))
+                .collect()
+        })
+        .collect();
+    for (row, imgs) in rendered.iter().enumerate() {
+        for (c, img) in imgs.iter().enumerate() {
+            paste(&mut sheet, img, c * cell, (row + 1) * cell);
+        }
+    }
+    Ok(sheet)
+}
+
+fn paste(dst: &mut RgbImage, src: &RgbImage, x0: usize, y0: usize) {
+    for y in 0..src.height {
+        let d = ((y0 + y) * dst.width + x0) * 3;
+        dst.data[d..d + src.width * 3]
+            .copy_from_slice(&src.data[y * src.width * 3..(y + 1) * src.width * 3]);
+    }
+}
+
+/// Area-weighted resampling of the region (x0, y0, w, h) of `src` to `out_w`×`out_h`.
+pub fn resize_area(
+    src: &RgbImage,
+    x0: usize,
+    y0: usize,
+    w: usize,
+    h: usize,
+    out_w: usize,
+    out_h: usize,
+) -> RgbImage {
+    let mut out = RgbImage::new(out_w, out_h);
+    let sx = w as f32 / out_w as f32;
+    let sy = h as f32 / out_h as f32;
+    for oy in 0..out_h {
+        let (ya, yb) = (oy as f32 * sy, (oy + 1) as f32 * sy);
+        for ox in 0..out_w {
+            let (xa, xb) = (ox as f32 * sx, (ox + 1) as f32 * sx);
+            let mut acc = [0.0f32; 3];
+            let mut wsum = 0.0;
+            for y in ya.floor() as usize..(yb.ceil() as usize).min(h) {
+                let wy = (yb.min(y as f32 + 1.0) - ya.max(y as f32)).max(0.0);
+                for x in xa.floor() as usize..(xb.ceil() as usize).min(w) {
+                    let wx = (xb.min(x as f32 + 1.0) - xa.max(x as f32)).max(0.0);
+                    let p = src.pixel(x0 + x, y0 + y);
+                    for c in 0..3 {
+                        acc[c] += wx * wy * p[c] as f32;
+                    }
+                    wsum += wx * wy;
+                }
+            }
+            let i = (oy * out_w + ox) * 3;
+            for (o, a) in out.data[i..i + 3].iter_mut().zip(acc) {
+                *o = (a / wsum).round() as u8;
+            }
+        }
+    }
+    out
+}

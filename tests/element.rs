@@ -1,0 +1,323 @@
+//! The element's pads, caps and negotiation for every format, unknown-source
+//! mode, the predicted-monitor output, target changes and state resets.
+
+mod support;
+
+use deskstage::math::Vec3;
+use gst::prelude::*;
+use gst_check::Harness;
+use support::*;
+
+/// A harness on the face pad only: unknown-source mode.
+fn face_harness(format: gst_video::VideoFormat) -> (gst::Element, Harness) {
+    let e = element();
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    h.set_src_caps(caps(format, FACE_W, FACE_H, 30));
+    (e, h)
+}
+
+#[test]
+fn pads_templates_and_documentation() {
+    let e = element();
+    assert!(e.static_pad("sink").is_some());
+    assert!(e.static_pad("src").is_some());
+    assert!(e.static_pad("monitor_src").is_some());
+    assert!(
+        e.static_pad("monitor_sink").is_none(),
+        "monitor_sink is requested, not always there"
+    );
+    let monitor = e
+        .request_pad_simple("monitor_sink")
+        .expect("monitor_sink can be requested");
+    assert_eq!(monitor.name(), "monitor_sink");
+    assert!(
+        e.request_pad_simple("monitor_sink").is_none(),
+        "there is one monitor stream"
+    );
+    e.release_request_pad(&monitor);
+    assert!(
+        e.request_pad_simple("monitor_sink").is_some(),
+        "a released monitor pad can be requested again"
+    );
+
+    let factory = e.factory().unwrap();
+    assert_eq!(factory.metadata("klass"), Some("Filter/Effect/Video"));
+    for p in e.list_properties() {
+        if p.owner_type() == e.type_() {
+            assert!(
+                p.blurb().is_some_and(|b| b.len() > 20),
+                "property {} needs a blurb",
+                p.name()
+            );
+        }
+    }
+}
+
+#[test]
+fn negotiates_and_relights_every_format() {
+    let face = face_rgb();
+    for format in FORMATS {
+        let (e, mut h) = face_harness(format);
+        e.set_property("target-location", target("left-key"));
+        let c = caps(format, FACE_W, FACE_H, 30);
+        let input = buffer(face, &c, frame_time(3), FRAME);
+        h.push(input.clone()).unwrap();
+        let out = h.pull().unwrap();
+        let out_caps = h.sinkpad().unwrap().current_caps().unwrap();
+        assert_eq!(out_caps, c, "{format:?}: output caps must equal input caps");
+        assert_eq!(
+            out.pts(),
+            Some(frame_time(3)),
+            "{format:?}: timestamps pass through"
+        );
+        assert_eq!(out.duration(), Some(FRAME));
+        let before = to_rgb(&input, &c);
+        let after = to_rgb(&out, &c);
+        let changed = mean_abs_diff(&before, &after);
+        assert!(
+            changed > 2.0,
+            "{format:?}: relighting to a side light must change the frame (mean change {changed:.2})"
+        );
+        assert_eq!(stat(&e, "relit"), 1);
+    }
+}
+
+#[test]
+fn refuses_unsupported_caps() {
+    let e = element();
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    h.set_src_caps(caps(gst_video::VideoFormat::Gray8, FACE_W, FACE_H, 30));
+    let info = gst_video::VideoInfo::builder(gst_video::VideoFormat::Gray8, FACE_W, FACE_H)
+        .build()
+        .unwrap();
+    let r = h.push(gst::Buffer::with_size(info.size()).unwrap());
+    assert_eq!(r, Err(gst::FlowError::NotNegotiated));
+}
+
+#[test]
+fn relights_without_a_monitor_stream() {
+    let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    for i in 0..3 {
+        h.push(buffer(face_rgb(), &c, frame_time(i), FRAME))
+            .unwrap();
+        let out = h.pull().unwrap();
+        assert!(
+            monitor_time(&out).is_none(),
+            "no monitor frame lit this one"
+        );
+    }
+    assert_eq!(stat(&e, "predicted-source"), 3);
+    assert_eq!(stat(&e, "known-source"), 0);
+    assert_eq!(
+        stat(&e, "light-predictions"),
+        3,
+        "unknown-source mode always predicts"
+    );
+}
+
+#[test]
+fn predicted_monitor_is_a_small_video_at_the_face_rate() {
+    let e = element();
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    let mut side = Harness::with_element(&e, None, Some("monitor_src"));
+    h.set_src_caps(caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 25));
+    let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 25);
+    h.push(buffer(
+        &render_face(Vec3::new(1.0, 1.0, 1.0)),
+        &c,
+        gst::ClockTime::ZERO,
+        FRAME,
+    ))
+    .unwrap();
+    h.pull().unwrap();
+    let predicted = side.pull().unwrap();
+    let pc = side.sinkpad().unwrap().current_caps().unwrap();
+    let s = pc.structure(0).unwrap();
+    assert_eq!(s.get::<&str>("format").unwrap(), "RGB");
+    assert_eq!(
+        (
+            s.get::<i32>("width").unwrap(),
+            s.get::<i32>("height").unwrap()
+        ),
+        (256, 128)
+    );
+    assert_eq!(
+        s.get::<gst::Fraction>("framerate").unwrap(),
+        gst::Fraction::new(25, 1)
+    );
+    assert_eq!(predicted.pts(), Some(gst::ClockTime::ZERO));
+    // A white monitor lit the face: the predicted screen is bright and neutral.
+    let map = predicted.map_readable().unwrap();
+    let mean: Vec<f64> = (0..3)
+        .map(|c| {
+            map.iter()
+                .skip(c)
+                .step_by(3)
+                .map(|&v| v as f64)
+                .sum::<f64>()
+                / (256.0 * 128.0)
+        })
+        .collect();
+    assert!(
+        mean.iter().all(|&m| m > 90.0),
+        "predicted white monitor too dark: {mean:?}"
+    );
+    assert!(
+        (mean[0] - mean[2]).abs() < 60.0,
+        "predicted white monitor not neutral: {mean:?}"
+    );
+
+    // A dark blue monitor: the prediction follows.
+    h.push(buffer(
+        &render_face(Vec3::new(0.05, 0.05, 0.6)),
+        &c,
+        FRAME,
+        FRAME,
+    ))
+    .unwrap();
+    h.pull().unwrap();
+    let blue = side.pull().unwrap();
+    let map = blue.map_readable().unwrap();
+    let b: f64 = map
+        .iter()
+        .skip(2)
+        .step_by(3)
+        .map(|&v| v as f64)
+        .sum::<f64>();
+    let r: f64 = map.iter().step_by(3).map(|&v| v as f64).sum::<f64>();
+    assert!(
+        b > r * 1.3,
+        "a blue monitor must be predicted bluer than red (r {r}, b {b})"
+    );
+}
+
+#[test]
+fn prediction_runs_only_when_someone_needs_it() {
+    let e = element();
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    let mut mh = Harness::with_element(&e, Some("monitor_sink"), None);
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    h.set_src_caps(c.clone());
+    mh.set_src_caps(rgb_caps(256, 144, 30));
+    for i in 0..3 {
+        mh.push(monitor_buffer(
+            Vec3::new(0.8, 0.8, 0.8),
+            frame_time(i),
+            FRAME,
+        ))
+        .unwrap();
+        if i > 0 {
+            h.push(buffer(face_rgb(), &c, frame_time(i - 1), FRAME))
+                .unwrap();
+            h.pull().unwrap();
+        }
+    }
+    assert_eq!(stat(&e, "known-source"), 2);
+    assert_eq!(
+        stat(&e, "light-predictions"),
+        0,
+        "monitor_src is unlinked and the source is known"
+    );
+}
+
+#[test]
+fn target_can_change_while_playing() {
+    let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
+    e.set_property("alpha", 1.0f32);
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    e.set_property("target-location", target("studio"));
+    h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+        .unwrap();
+    let studio = to_rgb(&h.pull().unwrap(), &c);
+    e.set_property("target-location", target("sunset"));
+    h.push(buffer(face_rgb(), &c, frame_time(1), FRAME))
+        .unwrap();
+    let sunset = to_rgb(&h.pull().unwrap(), &c);
+    assert!(
+        mean_abs_diff(&studio, &sunset) > 1.0,
+        "the next frame uses the new target"
+    );
+
+    // The same frame relit by a fresh element set to the sunset target from the start.
+    let (e2, mut h2) = face_harness(gst_video::VideoFormat::Rgb);
+    e2.set_property("alpha", 1.0f32);
+    e2.set_property("target-location", target("sunset"));
+    h2.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+        .unwrap();
+    let fresh = to_rgb(&h2.pull().unwrap(), &c);
+    let d = mean_abs_diff(&sunset, &fresh);
+    assert!(
+        d < 0.5,
+        "changing the target mid-stream gives what a fresh stream gives (diff {d:.3})"
+    );
+    assert_eq!(stat(&e, "target-encodes"), 2, "each target is encoded once");
+
+    // A target that cannot be read keeps the previous one, with a warning.
+    e.set_property("target-location", "/nonexistent/target.png");
+    h.push(buffer(face_rgb(), &c, frame_time(2), FRAME))
+        .unwrap();
+    let kept = to_rgb(&h.pull().unwrap(), &c);
+    assert!(mean_abs_diff(&kept, &sunset) < 0.5);
+}
+
+#[test]
+fn state_resets_on_flush_discontinuity_caps_and_gaps() {
+    let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    let bright = render_face(Vec3::new(1.0, 1.0, 1.0));
+    let dim = render_face(Vec3::new(0.3, 0.2, 0.2));
+    let run = |h: &mut Harness, img: &deskstage::monitor::RgbImage, i: u64, discont: bool| {
+        let mut b = buffer(img, &c, frame_time(i), FRAME);
+        if discont {
+            b.get_mut().unwrap().set_flags(gst::BufferFlags::DISCONT);
+        }
+        h.push(b).unwrap();
+        to_rgb(&h.pull().unwrap(), &c)
+    };
+    let first_dim = {
+        let (_, mut fresh) = face_harness(gst_video::VideoFormat::Rgb);
+        run(&mut fresh, &dim, 0, false)
+    };
+    // With history, the dim frame is smoothed with the bright one.
+    run(&mut h, &bright, 0, false);
+    let smoothed = run(&mut h, &dim, 1, false);
+    assert!(
+        mean_abs_diff(&smoothed, &first_dim) > 0.3,
+        "smoothing carries state between frames"
+    );
+    let resets = stat(&e, "resets");
+
+    // A discontinuity starts afresh: the result equals a first frame's.
+    run(&mut h, &bright, 2, false);
+    let after_discont = run(&mut h, &dim, 3, true);
+    assert!(mean_abs_diff(&after_discont, &first_dim) < 0.05);
+    assert!(stat(&e, "resets") > resets);
+
+    // A gap longer than reset-gap starts afresh too.
+    run(&mut h, &bright, 4, false);
+    let after_gap = run(&mut h, &dim, 4 + 60, false);
+    assert!(mean_abs_diff(&after_gap, &first_dim) < 0.05);
+
+    // So does a flush.
+    run(&mut h, &bright, 70, false);
+    assert!(h.push_event(gst::event::FlushStart::new()));
+    assert!(h.push_event(gst::event::FlushStop::new(true)));
+    assert!(
+        h.push_event(gst::event::Segment::new(&gst::FormattedSegment::<
+            gst::ClockTime,
+        >::new()))
+    );
+    let after_flush = run(&mut h, &dim, 71, false);
+    assert!(mean_abs_diff(&after_flush, &first_dim) < 0.05);
+
+    // And a caps change.
+    run(&mut h, &bright, 72, false);
+    let before = stat(&e, "resets");
+    let c2 = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 15);
+    h.set_src_caps(c2.clone());
+    h.push(buffer(&dim, &c2, frame_time(73), FRAME)).unwrap();
+    let after_caps = to_rgb(&h.pull().unwrap(), &c2);
+    assert!(stat(&e, "resets") > before);
+    assert!(mean_abs_diff(&after_caps, &first_dim) < 0.05);
+}

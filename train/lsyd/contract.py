@@ -1,0 +1,163 @@
+"""The model contract between the trainer and the Rust engine (version 1).
+
+A model is a folder with ``model.json`` (the manifest) and one ONNX graph per
+stage. ``models/CONTRACT.md`` documents it for people; this module and
+``plugin/engine/contract.rs`` implement it, and tests on both sides check
+that they agree. Change them together and raise ``VERSION`` when a field's
+meaning changes.
+
+Stages (names, inputs -> outputs; N = 1, R = resolution, c* = widths):
+
+- ``light_encoder``: ``light`` [N,3,16,32] -> ``code`` [N,256]
+- ``encoder``: ``image`` [N,3,R,R] -> ``stem`` [N,c0,R,R], ``e1`` .. ``e7``
+- ``light_decoder``: ``e2``, ``e4``, ``e6`` -> ``predicted_light`` [N,3,16,32]
+- ``delight``: ``e1`` .. ``e7``, ``source_code`` [N,256] -> ``f1`` .. ``f7``
+- ``decoder``: ``f1`` .. ``f7``, ``stem``, ``target_code`` [N,256] -> ``relit`` [N,3,R,R]
+
+Smoothing applies to the de-lit features ``f1`` .. ``f7``.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+NAME = "lsydrelight-model"
+VERSION = 1
+CODE_DIM = 256
+LIGHT_ROWS = 16
+LIGHT_COLS = 32
+SMOOTHED = [f"f{i}" for i in range(1, 8)]
+RAW = [f"e{i}" for i in range(1, 8)]
+
+IMAGE = {
+    "layout": "NCHW",
+    "dtype": "float32",
+    "colour": "sRGB",
+    "range": [0.0, 1.0],
+    "crop": "square; the element's face region, area-resampled to the resolution",
+}
+LIGHT = {
+    "layout": "NCHW",
+    "dtype": "float32",
+    "rows": LIGHT_ROWS,
+    "cols": LIGHT_COLS,
+    "colour": "linear",
+    "range": [0.0, 1.0],
+    "definition": (
+        "the monitor frame as shown (a screen capture, not mirrored), 8-bit sRGB decoded to linear "
+        "light, box-averaged over a 16 x 32 grid with area weights; row 0 is the top of the screen, "
+        "column 0 its left edge as the user sees it"
+    ),
+}
+
+
+def stage_specs(resolution: int, widths: tuple[int, ...]) -> dict:
+    """Tensor names and shapes of every stage for a network configuration."""
+    r = resolution
+    c0, c1, c2, c3, c4 = widths
+    raw_shapes = {
+        "e1": [1, c1, r // 2, r // 2],
+        "e2": [1, c1, r // 2, r // 2],
+        "e3": [1, c2, r // 4, r // 4],
+        "e4": [1, c2, r // 4, r // 4],
+        "e5": [1, c3, r // 8, r // 8],
+        "e6": [1, c3, r // 8, r // 8],
+        "e7": [1, c4, r // 16, r // 16],
+    }
+    delit_shapes = {f"f{i}": raw_shapes[f"e{i}"] for i in range(1, 8)}
+    light = [1, 3, LIGHT_ROWS, LIGHT_COLS]
+    code = [1, CODE_DIM]
+    stem = [1, c0, r, r]
+
+    def t(names_shapes: dict) -> list[dict]:
+        return [{"name": n, "shape": s, "dtype": "float32"} for n, s in names_shapes.items()]
+
+    return {
+        "light_encoder": {"file": "light_encoder.onnx", "inputs": t({"light": light}), "outputs": t({"code": code})},
+        "encoder": {
+            "file": "encoder.onnx",
+            "inputs": t({"image": [1, 3, r, r]}),
+            "outputs": t({"stem": stem, **raw_shapes}),
+        },
+        "light_decoder": {
+            "file": "light_decoder.onnx",
+            "inputs": t({k: raw_shapes[k] for k in ("e2", "e4", "e6")}),
+            "outputs": t({"predicted_light": light}),
+        },
+        "delight": {
+            "file": "delight.onnx",
+            "inputs": t({**raw_shapes, "source_code": code}),
+            "outputs": t(delit_shapes),
+        },
+        "decoder": {
+            "file": "decoder.onnx",
+            "inputs": t({**delit_shapes, "stem": stem, "target_code": code}),
+            "outputs": t({"relit": [1, 3, r, r]}),
+        },
+    }
+
+
+def manifest(
+    name: str, resolution: int, widths: tuple[int, ...], precision: str, training: dict, metrics: dict
+) -> dict:
+    return {
+        "contract": NAME,
+        "version": VERSION,
+        "name": name,
+        "resolution": resolution,
+        "widths": list(widths),
+        "precision": precision,
+        "code_dim": CODE_DIM,
+        "image": IMAGE,
+        "light": LIGHT,
+        "smoothed": SMOOTHED,
+        "stages": stage_specs(resolution, widths),
+        "training": training,
+        "metrics": metrics,
+    }
+
+
+def write(path: Path, m: dict) -> None:
+    path.write_text(json.dumps(m, indent=2) + "\n")
+
+
+def read(path: Path) -> dict:
+    m = json.loads(path.read_text())
+    if m.get("contract") != NAME or m.get("version") != VERSION:
+        raise ValueError(f"{path}: not a {NAME} version {VERSION} manifest")
+    return m
+
+
+_SRGB_TO_LINEAR = np.where(
+    np.arange(256) / 255.0 <= 0.04045,
+    np.arange(256) / 255.0 / 12.92,
+    ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4,
+).astype(np.float32)
+
+
+def light_from_frames(frames: np.ndarray) -> np.ndarray:
+    """Monitor frames (..., H, W, 3) uint8 sRGB to lights (..., 3, 16, 32) float32.
+
+    Box average in linear light with area weights, so any frame size works;
+    the Rust element computes the same (``plugin/light.rs``)."""
+    lin = _SRGB_TO_LINEAR[frames]
+    h, w = frames.shape[-3], frames.shape[-2]
+    ry = _area_matrix(h, LIGHT_ROWS)
+    rx = _area_matrix(w, LIGHT_COLS)
+    # (rows, H) @ (..., H, W, 3) @ (W, cols) per channel.
+    out = np.einsum("rh,...hwc,kw->...crk", ry, lin, rx, optimize=True)
+    return out.astype(np.float32)
+
+
+def _area_matrix(n_in: int, n_out: int) -> np.ndarray:
+    """Row i averages input samples [i * n_in / n_out, (i + 1) * n_in / n_out) with area weights."""
+    m = np.zeros((n_out, n_in), dtype=np.float64)
+    scale = n_in / n_out
+    for i in range(n_out):
+        a, b = i * scale, (i + 1) * scale
+        for j in range(int(np.floor(a)), min(int(np.ceil(b)), n_in)):
+            m[i, j] = min(b, j + 1) - max(a, j)
+    return (m / m.sum(axis=1, keepdims=True)).astype(np.float32)

@@ -1,0 +1,236 @@
+"""Loading captures, the held-out set and recordings written by ``deskstage``.
+
+Images are resampled to the network's resolution with exact area weights,
+the same resampling the element applies to its face crop.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import contract, pairing
+
+
+def area_resize(images: np.ndarray, out_h: int, out_w: int | None = None) -> np.ndarray:
+    """Area resampling of (..., H, W, C) uint8 images; returns float32 in [0, 255]."""
+    out_w = out_w or out_h
+    ry = contract._area_matrix(images.shape[-3], out_h)
+    rx = contract._area_matrix(images.shape[-2], out_w)
+    return np.einsum("rh,...hwc,kw->...rkc", ry, images.astype(np.float32), rx, optimize=True)
+
+
+def to_tensor(images: np.ndarray) -> torch.Tensor:
+    """(..., H, W, 3) in [0, 255] to (..., 3, H, W) float in [0, 1]."""
+    t = torch.from_numpy(np.ascontiguousarray(images, dtype=np.float32)) / 255.0
+    return t.movedim(-1, -3)
+
+
+@dataclasses.dataclass
+class Capture:
+    """One capture session as written by ``deskstage captures`` or ``import_capture``."""
+
+    path: Path
+    face: np.ndarray  # (T, S, S, 3) uint8, memory-mapped
+    monitor: np.ndarray  # (T, H, W, 3) uint8, memory-mapped
+    timestamps: np.ndarray
+    keypoints: np.ndarray  # (T, 68, 2)
+    truth: np.ndarray | None  # simulator only: never used for training
+
+    @classmethod
+    def load(cls, path: Path) -> Capture:
+        truth = path / "truth.npy"
+        return cls(
+            path=path,
+            face=np.load(path / "face.npy", mmap_mode="r"),
+            monitor=np.load(path / "monitor.npy", mmap_mode="r"),
+            timestamps=np.load(path / "timestamps.npy"),
+            keypoints=np.load(path / "keypoints.npy"),
+            truth=np.load(truth) if truth.exists() else None,
+        )
+
+    def lights(self) -> np.ndarray:
+        return np.concatenate(
+            [contract.light_from_frames(self.monitor[i : i + 64]) for i in range(0, len(self.monitor), 64)]
+        )
+
+
+def capture_dirs(root: Path) -> list[Path]:
+    dirs = sorted(p for p in root.iterdir() if (p / "face.npy").exists())
+    if not dirs:
+        raise FileNotFoundError(f"no capture sessions (folders with face.npy) under {root}")
+    return dirs
+
+
+@dataclasses.dataclass
+class PairSet:
+    """Frames at network resolution, their lights, and (source, target) index pairs."""
+
+    images: torch.Tensor  # (N, 3, R, R) uint8
+    lights: torch.Tensor  # (N, 3, 16, 32) float32
+    pairs: torch.Tensor  # (P, 2) int64
+
+    def batch(self, idx: torch.Tensor) -> tuple[torch.Tensor, ...]:
+        p = self.pairs[idx]
+        s, t = p[:, 0], p[:, 1]
+        return self.images[s].float() / 255.0, self.lights[s], self.images[t].float() / 255.0, self.lights[t]
+
+
+def _resize_chunks(face: np.ndarray, resolution: int) -> np.ndarray:
+    out = np.empty((len(face), resolution, resolution, 3), dtype=np.uint8)
+    for i in range(0, len(face), 128):
+        out[i : i + 128] = np.clip(np.rint(area_resize(face[i : i + 128], resolution)), 0, 255)
+    return out
+
+
+def _cached(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+    """A session's frames at network resolution and its lights, computed once and kept
+    next to the capture (``cache-<resolution>.npz``)."""
+    path = session / f"cache-{resolution}.npz"
+    source_time = max((session / n).stat().st_mtime for n in ("face.npy", "monitor.npy"))
+    if path.exists() and path.stat().st_mtime >= source_time:
+        with np.load(path) as z:
+            return z["images"], z["lights"]
+    cap = Capture.load(session)
+    images, lights = _resize_chunks(cap.face, resolution), cap.lights()
+    np.savez(path, images=images, lights=lights)
+    return images, lights
+
+
+def keypoint_pairs(root: Path, resolution: int, rule: pairing.PairingRule) -> tuple[PairSet, list[dict]]:
+    """Pairs found by keypoints within each capture session, as on real captures."""
+    images, lights, pairs, reports = [], [], [], []
+    offset = 0
+    for d in capture_dirs(root):
+        imgs, lit = _cached(d, resolution)
+        keypoints = np.load(d / "keypoints.npy")
+        p = pairing.find_pairs(keypoints, lit, rule)
+        truth = d / "truth.npy"
+        if truth.exists():
+            reports.append({"session": d.name, **pairing.pairing_report(keypoints, lit, np.load(truth), rule)})
+        images.append(imgs)
+        lights.append(lit)
+        pairs.append(p + offset)
+        offset += len(imgs)
+    return (
+        PairSet(
+            images=torch.from_numpy(np.concatenate(images)).permute(0, 3, 1, 2).contiguous(),
+            lights=torch.from_numpy(np.concatenate(lights)),
+            pairs=torch.from_numpy(np.concatenate(pairs)).long(),
+        ),
+        reports,
+    )
+
+
+def exact_pairs(root: Path, resolution: int) -> PairSet:
+    """All ordered pairs of the simulator's paired ground truth (same pose, different light)."""
+    face = np.load(root / "face.npy", mmap_mode="r")  # (poses, lights, S, S, 3)
+    monitor = np.load(root / "monitor.npy", mmap_mode="r")
+    n_pose, n_light = face.shape[:2]
+    images = _resize_chunks(face.reshape(-1, *face.shape[2:]), resolution)
+    lights = contract.light_from_frames(np.asarray(monitor).reshape(-1, *monitor.shape[2:]))
+    idx = np.arange(n_pose * n_light).reshape(n_pose, n_light)
+    pairs = np.array([(p[i], p[j]) for p in idx for i in range(n_light) for j in range(n_light) if i != j])
+    return PairSet(
+        images=torch.from_numpy(images).permute(0, 3, 1, 2).contiguous(),
+        lights=torch.from_numpy(lights),
+        pairs=torch.from_numpy(pairs).long(),
+    )
+
+
+@dataclasses.dataclass
+class Heldout:
+    """The 9 poses x 9 lights test set: webcam frames, exact clean frames, lights."""
+
+    images: np.ndarray  # (9, 9, S, S, 3) uint8, inputs
+    clean: np.ndarray  # (9, 9, S, S, 3) uint8, exact ground truth
+    lights: np.ndarray  # (9, 3, 16, 32)
+
+    @classmethod
+    def load(cls, path: Path) -> Heldout:
+        return cls(
+            images=np.load(path / "images.npy"),
+            clean=np.load(path / "clean.npy"),
+            lights=contract.light_from_frames(np.load(path / "monitor.npy")),
+        )
+
+    def pairs(self) -> list[tuple[int, int, int]]:
+        """(pose, source light, target light) for the 36 unordered light pairs of each pose,
+        both directions: 648 relightings covering the paper's 324 pairs."""
+        n_pose, n_light = self.images.shape[:2]
+        return [(p, i, j) for p in range(n_pose) for i in range(n_light) for j in range(n_light) if i != j]
+
+
+def read_y4m(path: Path) -> tuple[np.ndarray, int]:
+    """All frames of a ``.y4m`` written by ``deskstage`` as RGB uint8 (BT.601 limited), and the fps."""
+    raw = path.read_bytes()
+    header_end = raw.index(b"\n")
+    fields = raw[:header_end].decode().split()
+    w = int(next(f[1:] for f in fields if f.startswith("W")))
+    h = int(next(f[1:] for f in fields if f.startswith("H")))
+    fps = int(next(f[1:] for f in fields if f.startswith("F")).split(":")[0])
+    c444 = any(f.startswith("C444") for f in fields)
+    cw, ch = (w, h) if c444 else (w // 2, h // 2)
+    frame_bytes = w * h + 2 * cw * ch
+    frames = []
+    pos = header_end + 1
+    while pos < len(raw):
+        pos = raw.index(b"\n", pos) + 1  # past "FRAME...\n"
+        buf = np.frombuffer(raw, dtype=np.uint8, count=frame_bytes, offset=pos)
+        pos += frame_bytes
+        y = buf[: w * h].reshape(h, w).astype(np.float32)
+        u = buf[w * h : w * h + cw * ch].reshape(ch, cw).astype(np.float32)
+        v = buf[w * h + cw * ch :].reshape(ch, cw).astype(np.float32)
+        if not c444:
+            u = u.repeat(2, 0).repeat(2, 1)
+            v = v.repeat(2, 0).repeat(2, 1)
+        yy = (y - 16.0) / 219.0
+        cb = (u - 128.0) / 224.0
+        cr = (v - 128.0) / 224.0
+        rgb = np.stack([yy + 1.402 * cr, yy - 0.344136 * cb - 0.714136 * cr, yy + 1.772 * cb], -1)
+        frames.append(np.clip(np.rint(rgb * 255.0), 0, 255).astype(np.uint8))
+    return np.stack(frames), fps
+
+
+@dataclasses.dataclass
+class RecordingCrops:
+    """A test recording's centre-square crops at network resolution, its lights and ground truth."""
+
+    name: str
+    face: np.ndarray  # (T, R, R, 3) float32 in [0, 255]
+    lights: np.ndarray  # (T, 3, 16, 32)
+    truth: dict[str, np.ndarray]  # target name -> (T, R, R, 3) float32
+    target_lights: dict[str, np.ndarray]  # target name -> (3, 16, 32)
+    cuts: list[int]
+
+    @classmethod
+    def load(cls, path: Path, resolution: int) -> RecordingCrops:
+        meta = json.loads((path / "meta.json").read_text())
+
+        def crop(frames: np.ndarray) -> np.ndarray:
+            h, w = frames.shape[1:3]
+            s = min(h, w)
+            y0, x0 = (h - s) // 2, (w - s) // 2
+            return area_resize(frames[:, y0 : y0 + s, x0 : x0 + s], resolution)
+
+        face, _ = read_y4m(path / "face.y4m")
+        monitor, _ = read_y4m(path / "monitor.y4m")
+        truth = {t: crop(read_y4m(path / f"truth-{t}.y4m")[0]) for t in meta["targets"]}
+        from PIL import Image
+
+        target_lights = {
+            t: contract.light_from_frames(np.asarray(Image.open(path / f"target-{t}.png").convert("RGB")))
+            for t in meta["targets"]
+        }
+        return cls(
+            name=path.name,
+            face=crop(face),
+            lights=contract.light_from_frames(monitor),
+            truth=truth,
+            target_lights=target_lights,
+            cuts=meta["cuts_before_frames"],
+        )

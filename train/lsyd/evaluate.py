@@ -1,0 +1,241 @@
+"""Evaluate trained networks the way the paper's Tables 1-3 do, on exact ground truth.
+
+    python -m lsyd.evaluate --data data --out results/paper \\
+        --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
+        --no-delight runs/t-nodelight --no-prediction runs/t-nopred --neither runs/t-neither
+
+- Table 1: relighting the held-out set (9 poses x 9 lights; every ordered pair of
+  lights of a pose, 648 relightings over the paper's 324 pairs), ours with and
+  without the known source light against both baselines: RMSE (0-255), MS-SSIM,
+  FLIP, and monitor-prediction MAE.
+- Table 2: temporal consistency on the test recordings relit to each target light:
+  the paper's adjacent-frame RMSE and error rates, the change error against the
+  ground truth's changes, and accuracy; ablating feature smoothing and
+  source-light averaging.
+- Table 3: ablation of LCFN de-lighting and of source-light prediction.
+
+Outputs ``<out>.md``, ``<out>.json`` and a bar chart ``<out>.png``. Relit crops
+are put back at the held-out set's full 256 x 256 with the element's transfer
+(``metrics.transfer``); recordings are scored at network resolution.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import data, metrics
+from .train import load_network
+
+TABLE2_RECORDINGS = ("steady", "slow", "cuts")
+
+
+def _img(x: np.ndarray) -> torch.Tensor:
+    """(..., H, W, 3) in [0, 255] to (N, 3, H, W) in [0, 1]."""
+    return data.to_tensor(x).reshape(-1, 3, *x.shape[-3:-1])
+
+
+@torch.no_grad()
+def heldout_scores(net, cfg, held: data.Heldout, known_source: bool) -> dict[str, float]:
+    """Table 1/3 metrics of one network on the held-out set."""
+    res = cfg.net.resolution
+    small = data.area_resize(held.images, res)  # (9, 9, r, r, 3)
+    lights = torch.from_numpy(held.lights)
+    scores = {"rmse": [], "ms_ssim": [], "flip": [], "monitor_mae": []}
+    for p in range(held.images.shape[0]):
+        for i in range(held.images.shape[1]):
+            js = [j for j in range(held.images.shape[1]) if j != i]
+            x = _img(np.repeat(small[p, i][None], len(js), 0))
+            src = lights[i][None].expand(len(js), -1, -1, -1) if known_source else None
+            relit, predicted = net(x, src, lights[js])
+            relit = relit.clamp(0, 1).numpy()
+            if predicted is not None:
+                scores["monitor_mae"].append(float((predicted[0] - lights[i]).abs().mean()))
+            for k, j in enumerate(js):
+                out = metrics.transfer(held.images[p, i], x[k].numpy(), relit[k])
+                gt = held.clean[p, j]
+                scores["rmse"].append(metrics.rmse(out, gt))
+                scores["ms_ssim"].append(metrics.ms_ssim(out, gt))
+                scores["flip"].append(metrics.flip(out, gt))
+    return {k: float(np.mean(v)) if v else float("nan") for k, v in scores.items()}
+
+
+class Sequence:
+    """Relights a video frame by frame as the element does: averaged source light,
+    smoothed de-lit features (LCFN networks), one target per output."""
+
+    def __init__(self, net, cfg, alpha: float, beta: float, frames: int, known_source: bool):
+        self.net, self.cfg = net, cfg
+        self.alpha, self.beta, self.frames = alpha, beta, frames
+        self.known = known_source
+        self.history: list[torch.Tensor] = []
+        self.previous: list[torch.Tensor] | None = None
+
+    def _average(self, light: torch.Tensor) -> torch.Tensor:
+        self.history = [light] + self.history[: self.frames - 1]
+        w = torch.tensor([self.beta**i for i in range(len(self.history))])
+        return sum(wi * li for wi, li in zip(w, self.history)) / w.sum()
+
+    @torch.no_grad()
+    def step(self, image: torch.Tensor, light: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+        """image (1, 3, r, r), light (1, 3, 16, 32), targets (T, 3, 16, 32) -> (T, 3, r, r)."""
+        n = len(targets)
+        if self.cfg.net.arch != "lcfn":
+            src = self._average(light) if self.known and self.cfg.net.arch == "sengupta" else light
+            relit, _ = self.net(image.expand(n, -1, -1, -1), src.expand(n, -1, -1, -1), targets)
+            return relit.clamp(0, 1)
+        stem, feats = self.net.encode(image)
+        src = light if self.known else self.net.predict_light(feats)
+        code = self.net.light_encoder(self._average(src))
+        f = self.net.delit(feats, code)
+        if self.previous is not None:
+            f = [self.alpha * a + (1 - self.alpha) * b for a, b in zip(f, self.previous)]
+        self.previous = f
+        tcode = self.net.light_encoder(targets)
+        relit = self.net.decode(stem.expand(n, -1, -1, -1), [t.expand(n, -1, -1, -1) for t in f], tcode)
+        return relit.clamp(0, 1)
+
+
+def recording_scores(net, cfg, rec: data.RecordingCrops, alpha: float, beta: float, frames: int, known: bool) -> dict:
+    seq = Sequence(net, cfg, alpha, beta, frames, known)
+    names = list(rec.truth)
+    targets = torch.from_numpy(np.stack([rec.target_lights[t] for t in names]))
+    outs = []
+    for t in range(len(rec.face)):
+        image = data.to_tensor(rec.face[t])[None]
+        light = torch.from_numpy(rec.lights[t])[None]
+        outs.append(seq.step(image, light, targets).numpy())
+    outs = np.stack(outs) * 255.0  # (T, targets, 3, r, r)
+    per_target = [
+        metrics.temporal(outs[:, k].transpose(0, 2, 3, 1), rec.truth[name], rec.cuts) for k, name in enumerate(names)
+    ]
+    return {k: float(np.mean([p[k] for p in per_target])) for k in per_target[0]}
+
+
+def mean_over(recs: list, **kw) -> dict:
+    rows = [recording_scores(rec=r, **kw) for r in recs]
+    return {k: float(np.nanmean([r[k] for r in rows])) for k in rows[0]}
+
+
+def fmt(v: float, digits: int = 4) -> str:
+    return "n/a" if v != v else f"{v:.{digits}f}"
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", type=Path, default=Path("data"))
+    p.add_argument("--out", type=Path, default=Path("results/paper"))
+    for name in ("ours", "sun", "sengupta", "no-delight", "no-prediction", "neither"):
+        p.add_argument(f"--{name}", type=Path, required=True)
+    p.add_argument("--threads", type=int, default=0)
+    a = p.parse_args()
+    if a.threads:
+        torch.set_num_threads(a.threads)
+
+    held = data.Heldout.load(a.data / "heldout")
+    nets = {
+        k: load_network(getattr(a, k.replace("-", "_")))
+        for k in ("ours", "sun", "sengupta", "no-delight", "no-prediction", "neither")
+    }
+    res = nets["ours"][1].net.resolution
+    results: dict = {"table1": {}, "table2": {}, "table3": {}}
+
+    def held_row(key: str, known: bool) -> dict:
+        net, cfg = nets[key]
+        print(f"held-out: {key} ({'known' if known else 'predicted'} source)", flush=True)
+        return heldout_scores(net, cfg, held, known)
+
+    ours_known = held_row("ours", True)
+    results["table1"] = {
+        "Sun et al. 2019 (source predicted)": held_row("sun", True),
+        "Ours, source predicted": held_row("ours", False),
+        "Sengupta et al. 2021 (source given)": held_row("sengupta", True),
+        "Ours, source given": ours_known,
+    }
+    results["table3"] = {
+        "no prediction, no de-lighting": held_row("neither", True),
+        "prediction, no de-lighting": held_row("no-delight", True),
+        "no prediction, de-lighting": held_row("no-prediction", True),
+        "prediction, de-lighting (ours)": ours_known,
+    }
+
+    recs = [data.RecordingCrops.load(a.data / "recordings" / n, res) for n in TABLE2_RECORDINGS]
+    ours, cfg = nets["ours"]
+    rows2 = {
+        "Sun et al. 2019": dict(net=nets["sun"][0], cfg=nets["sun"][1], alpha=1.0, beta=0.6, frames=1, known=True),
+        "Sengupta et al. 2021": dict(
+            net=nets["sengupta"][0], cfg=nets["sengupta"][1], alpha=1.0, beta=0.6, frames=1, known=True
+        ),
+        "Sengupta et al. 2021 + L_src avg": dict(
+            net=nets["sengupta"][0], cfg=nets["sengupta"][1], alpha=1.0, beta=0.6, frames=3, known=True
+        ),
+        "Ours (base)": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=1, known=True),
+        "Ours + L_src avg": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=3, known=True),
+        "Ours + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=1, known=True),
+        "Ours + L_src avg + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=3, known=True),
+    }
+    for name, kw in rows2.items():
+        print(f"recordings: {name}", flush=True)
+        results["table2"][name] = mean_over(recs, **kw)
+
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.with_suffix(".json").write_text(json.dumps(results, indent=2) + "\n")
+    a.out.with_suffix(".md").write_text(markdown(results))
+    chart(results, a.out.with_suffix(".png"))
+    print(markdown(results))
+
+
+def markdown(r: dict) -> str:
+    lines = ["### Table 1: relighting the held-out set (648 relightings of 324 pairs, exact ground truth)", ""]
+    lines += ["| method | RMSE (0-255) | MS-SSIM | FLIP | monitor MAE |", "|---|---|---|---|---|"]
+    for k, v in r["table1"].items():
+        lines.append(
+            f"| {k} | {fmt(v['rmse'], 3)} | {fmt(v['ms_ssim'])} | {fmt(v['flip'])} | {fmt(v['monitor_mae'])} |"
+        )
+    lines += ["", "### Table 2: temporal consistency on the test recordings (steady, slow, cuts; 3 targets each)", ""]
+    t = metrics.TEMPORAL_THRESHOLDS
+    lines += [
+        f"| method | adjacent RMSE | >{t[0]:g} | >{t[1]:g} | >{t[2]:g} | change RMSE | change RMSE at cuts | RMSE |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for k, v in r["table2"].items():
+        rates = " | ".join(f"{100 * v[f'adjacent_over_{x:g}']:.1f}%" for x in t)
+        lines.append(
+            f"| {k} | {fmt(v['adjacent_rmse'], 3)} | {rates} | {fmt(v['change_rmse'], 3)} | "
+            f"{fmt(v['change_rmse_at_cuts'], 3)} | {fmt(v['rmse'], 3)} |"
+        )
+    lines += ["", "### Table 3: ablation of source-light prediction and LCFN de-lighting (held-out set)", ""]
+    lines += ["| variant | RMSE (0-255) | MS-SSIM | FLIP |", "|---|---|---|---|"]
+    for k, v in r["table3"].items():
+        lines.append(f"| {k} | {fmt(v['rmse'], 3)} | {fmt(v['ms_ssim'])} | {fmt(v['flip'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def chart(r: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.5))
+    t1 = r["table1"]
+    names = list(t1)
+    for ax, key, label in zip(axes[:2], ("rmse", "flip"), ("RMSE (0-255), lower is better", "FLIP, lower is better")):
+        ax.barh(names, [t1[n][key] for n in names], color=["#999", "#4a8", "#999", "#2a6"])
+        ax.set_xlabel(label)
+        ax.set_title(f"Table 1: held-out {key.upper()}")
+    t2 = r["table2"]
+    n2 = list(t2)
+    axes[2].barh(n2, [t2[n]["change_rmse"] for n in n2], color="#58a")
+    axes[2].set_xlabel("change RMSE vs ground truth, lower is better")
+    axes[2].set_title("Table 2: temporal")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+if __name__ == "__main__":
+    main()

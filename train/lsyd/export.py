@@ -1,0 +1,206 @@
+"""Export a trained LCFN network to the model contract: five ONNX stages and a manifest.
+
+    python -m lsyd.export --run runs/default --data data --out models/default
+
+The stages let the engine keep the de-lit features between frames and smooth
+them, encode a target light once, skip light prediction when nobody needs it,
+and relight with an unknown source light (see ``contract.py``). Every stage
+and the chained result are checked against PyTorch on real held-out frames;
+the export fails when ONNX Runtime differs by more than ``PARITY_TOLERANCE``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import torch
+from torch import nn
+
+from . import contract, data, model
+from .train import load_network
+
+PARITY_TOLERANCE = 1e-4
+OPSET = 17
+
+
+class LightEncoderStage(nn.Module):
+    def __init__(self, net: model.LcfnNet):
+        super().__init__()
+        self.net = net
+
+    def forward(self, light):
+        return self.net.light_encoder(light)
+
+
+class EncoderStage(nn.Module):
+    def __init__(self, net: model.LcfnNet):
+        super().__init__()
+        self.net = net
+
+    def forward(self, image):
+        stem, feats = self.net.encode(image)
+        return (stem, *feats)
+
+
+class LightDecoderStage(nn.Module):
+    def __init__(self, net: model.LcfnNet):
+        super().__init__()
+        self.net = net
+
+    def forward(self, e2, e4, e6):
+        return self.net.light_decoder(e2, e4, e6)
+
+
+class DelightStage(nn.Module):
+    def __init__(self, net: model.LcfnNet):
+        super().__init__()
+        self.net = net
+
+    def forward(self, e1, e2, e3, e4, e5, e6, e7, source_code):
+        return tuple(self.net.delit([e1, e2, e3, e4, e5, e6, e7], source_code))
+
+
+class DecoderStage(nn.Module):
+    def __init__(self, net: model.LcfnNet):
+        super().__init__()
+        self.net = net
+
+    def forward(self, f1, f2, f3, f4, f5, f6, f7, stem, target_code):
+        relit = self.net.decode(stem, [f1, f2, f3, f4, f5, f6, f7], target_code)
+        # The contract's output range; the clamp is part of the graph.
+        return relit.clamp(0.0, 1.0)
+
+
+def stage_modules(net: model.LcfnNet) -> dict[str, nn.Module]:
+    return {
+        "light_encoder": LightEncoderStage(net),
+        "encoder": EncoderStage(net),
+        "light_decoder": LightDecoderStage(net),
+        "delight": DelightStage(net),
+        "decoder": DecoderStage(net),
+    }
+
+
+def check_exportable(cfg: model.NetConfig) -> None:
+    if cfg.arch != "lcfn" or not cfg.delight or not cfg.light_prediction:
+        raise SystemExit(
+            f"only the full LCFN network fits the model contract; this run is {cfg} "
+            "(baselines and ablations are evaluated in Python only)"
+        )
+
+
+def reference_run(
+    net: model.LcfnNet, image: torch.Tensor, src: torch.Tensor, tgt: torch.Tensor
+) -> dict[str, np.ndarray]:
+    """Every contract tensor for one frame, computed by PyTorch."""
+    with torch.no_grad():
+        stem, e = net.encode(image)
+        out = {
+            "image": image,
+            "light": src,
+            "target_light": tgt,
+            "stem": stem,
+            **{f"e{i + 1}": t for i, t in enumerate(e)},
+        }
+        out["predicted_light"] = net.predict_light(e)
+        out["source_code"] = net.light_encoder(src)
+        out["target_code"] = net.light_encoder(tgt)
+        f = net.delit(e, out["source_code"])
+        out.update({f"f{i + 1}": t for i, t in enumerate(f)})
+        out["relit"] = net.decode(stem, f, out["target_code"]).clamp(0.0, 1.0)
+    return {k: v.numpy() for k, v in out.items()}
+
+
+def export(run: Path, data_root: Path, out: Path) -> dict:
+    net, cfg = load_network(run)
+    check_exportable(cfg.net)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = contract.stage_specs(cfg.net.resolution, cfg.net.widths)
+    modules = stage_modules(net)
+
+    held = data.Heldout.load(data_root / "heldout")
+    res = cfg.net.resolution
+    image = data.to_tensor(data.area_resize(held.images[0, 0], res))[None]
+    src = torch.from_numpy(held.lights[0])[None]
+    tgt = torch.from_numpy(held.lights[4])[None]
+    ref = reference_run(net, image, src, tgt)
+    ref["code"] = ref["source_code"]  # the light encoder's output for the source light
+
+    for name, module in modules.items():
+        spec = specs[name]
+        inputs = tuple(torch.from_numpy(ref[t["name"]]) for t in spec["inputs"])
+        torch.onnx.export(
+            module,
+            inputs,
+            str(out / spec["file"]),
+            input_names=[t["name"] for t in spec["inputs"]],
+            output_names=[t["name"] for t in spec["outputs"]],
+            opset_version=OPSET,
+            dynamo=False,
+        )
+    report = parity(out, specs, ref)
+    return {"config": cfg, "parity": report}
+
+
+def _session(path: Path) -> ort.InferenceSession:
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+
+
+def parity(folder: Path, specs: dict, ref: dict[str, np.ndarray]) -> dict[str, float]:
+    """Max abs difference of each stage's outputs (given PyTorch's inputs) and of the
+    whole chain run in ONNX Runtime alone; raises when over the tolerance."""
+    diffs = {}
+    for name, spec in specs.items():
+        sess = _session(folder / spec["file"])
+        feed = {t["name"]: ref[t["name"]] for t in spec["inputs"]}
+        outs = sess.run([t["name"] for t in spec["outputs"]], feed)
+        diffs[name] = max(float(np.abs(o - ref[t["name"]]).max()) for o, t in zip(outs, spec["outputs"]))
+    # The chain: ONNX Runtime's own intermediate tensors feed the next stage.
+    s = {n: _session(folder / sp["file"]) for n, sp in specs.items()}
+    enc = dict(zip([t["name"] for t in specs["encoder"]["outputs"]], s["encoder"].run(None, {"image": ref["image"]})))
+    (src_code,) = s["light_encoder"].run(None, {"light": ref["light"]})
+    (tgt_code,) = s["light_encoder"].run(None, {"light": ref["target_light"]})
+    delit = s["delight"].run(None, {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": src_code})
+    feed = {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": tgt_code}
+    (relit,) = s["decoder"].run(None, feed)
+    diffs["chain"] = float(np.abs(relit - ref["relit"]).max())
+    worst = max(diffs.values())
+    if worst > PARITY_TOLERANCE:
+        raise SystemExit(f"ONNX Runtime differs from PyTorch by {worst:.2e} > {PARITY_TOLERANCE:.0e}: {diffs}")
+    return diffs
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--run", type=Path, required=True)
+    p.add_argument("--data", type=Path, default=Path("data"))
+    p.add_argument("--out", type=Path, required=True)
+    p.add_argument("--name", default=None, help="model name in the manifest (default: the folder name)")
+    p.add_argument("--metrics", type=Path, default=None, help="metrics JSON to record in the manifest")
+    a = p.parse_args()
+    result = export(a.run, a.data, a.out)
+    cfg = result["config"]
+    training = {
+        "run": a.run.name,
+        "arch": cfg.net.arch,
+        "steps": cfg.steps,
+        "batch": cfg.batch,
+        "seed": cfg.seed,
+        "pairs": cfg.pairs,
+        "data": "deskstage captures of the default subject (see models/README.md)",
+    }
+    metrics = json.loads(a.metrics.read_text()) if a.metrics else {}
+    m = contract.manifest(a.name or a.out.name, cfg.net.resolution, cfg.net.widths, "fp32", training, metrics)
+    m["parity"] = result["parity"]
+    contract.write(a.out / "model.json", m)
+    print(f"exported {a.out}: parity max abs diff {max(result['parity'].values()):.2e}")
+
+
+if __name__ == "__main__":
+    main()

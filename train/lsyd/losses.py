@@ -1,0 +1,92 @@
+"""Training losses (paper section 3.4) and the substitutes used offline.
+
+The paper's perceptual loss uses an ImageNet network (LPIPS/VGG), whose
+weights cannot be downloaded here. Its stand-in, ``perceptual``, compares
+images at several scales: an L1 on a Laplacian pyramid (edges and texture
+at each scale) plus a structural term (1 - SSIM). For the 16 x 32 light
+images the stand-in is L1 on their gradients.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import nn
+
+
+def _gauss_kernel(size: int = 11, sigma: float = 1.5) -> torch.Tensor:
+    x = torch.arange(size, dtype=torch.float32) - (size - 1) / 2
+    g = torch.exp(-(x**2) / (2 * sigma**2))
+    g = g / g.sum()
+    return (g[:, None] * g[None, :])[None, None]
+
+
+def ssim(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Mean SSIM of images in [0, 1] (Wang et al. 2004, 11x11 Gaussian window)."""
+    c = a.shape[1]
+    k = _gauss_kernel().to(a).expand(c, 1, -1, -1)
+
+    def blur(x):
+        return F.conv2d(x, k, groups=c)
+
+    mu_a, mu_b = blur(a), blur(b)
+    var_a = blur(a * a) - mu_a**2
+    var_b = blur(b * b) - mu_b**2
+    cov = blur(a * b) - mu_a * mu_b
+    c1, c2 = 0.01**2, 0.03**2
+    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
+    return s.mean()
+
+
+def laplacian_l1(a: torch.Tensor, b: torch.Tensor, levels: int = 4) -> torch.Tensor:
+    """L1 between Laplacian pyramids, each level weighted equally."""
+    loss = a.new_zeros(())
+    for _ in range(levels):
+        da, db = F.avg_pool2d(a, 2), F.avg_pool2d(b, 2)
+        ua = F.interpolate(da, size=a.shape[-2:], mode="bilinear", align_corners=False)
+        ub = F.interpolate(db, size=b.shape[-2:], mode="bilinear", align_corners=False)
+        loss = loss + F.l1_loss(a - ua, b - ub)
+        a, b = da, db
+    return loss + F.l1_loss(a, b)
+
+
+def perceptual(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Offline stand-in for the perceptual loss on images."""
+    return laplacian_l1(a, b) + 0.5 * (1.0 - ssim(a, b))
+
+
+def light_perceptual(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Offline stand-in for the perceptual loss on light images: L1 of their gradients."""
+    dx = F.l1_loss(a[..., 1:] - a[..., :-1], b[..., 1:] - b[..., :-1])
+    dy = F.l1_loss(a[..., 1:, :] - a[..., :-1, :], b[..., 1:, :] - b[..., :-1, :])
+    return dx + dy
+
+
+class PatchDiscriminator(nn.Module):
+    """A PatchGAN discriminator (Isola et al. 2017) scoring overlapping patches, trained as an LSGAN."""
+
+    def __init__(self, width: int = 32):
+        super().__init__()
+        c = width
+        self.net = nn.Sequential(
+            nn.Conv2d(3, c, 4, 2, 1),
+            nn.LeakyReLU(0.2),
+            nn.Conv2d(c, 2 * c, 4, 2, 1),
+            nn.InstanceNorm2d(2 * c),
+            nn.LeakyReLU(0.2),
+            nn.Conv2d(2 * c, 4 * c, 4, 2, 1),
+            nn.InstanceNorm2d(4 * c),
+            nn.LeakyReLU(0.2),
+            nn.Conv2d(4 * c, 1, 4, 1, 1),
+        )
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x * 2.0 - 1.0)
+
+
+def lsgan_generator(d_fake: torch.Tensor) -> torch.Tensor:
+    return ((d_fake - 1.0) ** 2).mean()
+
+
+def lsgan_discriminator(d_real: torch.Tensor, d_fake: torch.Tensor) -> torch.Tensor:
+    return ((d_real - 1.0) ** 2).mean() + (d_fake**2).mean()

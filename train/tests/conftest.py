@@ -1,0 +1,37 @@
+"""Shared fixtures: small simulator datasets, rendered once per checkout into target/test-data."""
+
+from __future__ import annotations
+
+import subprocess
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+DATA = ROOT / "target" / "test-data"
+
+
+def deskstage(*args: str) -> None:
+    binary = ROOT / "target" / "release" / "deskstage"
+    if not binary.exists():
+        subprocess.run(["cargo", "build", "--release", "-p", "deskstage"], cwd=ROOT, check=True)
+    subprocess.run([str(binary), *args], cwd=ROOT, check=True)
+
+
+@pytest.fixture(scope="session")
+def sim_data() -> Path:
+    """One 30 s capture session at 10 fps (128 x 128), 24 paired poses, and the held-out set."""
+    if not (DATA / "captures" / "session-000" / "keypoints.npy").exists():
+        deskstage("captures", "--out", str(DATA / "captures"), "--sessions", "1", "--seconds", "30", "--size", "128")
+    if not (DATA / "paired" / "truth.npy").exists():
+        deskstage("paired", "--out", str(DATA / "paired"), "--poses", "24", "--size", "128")
+    if not (DATA / "heldout" / "clean.npy").exists():
+        deskstage("heldout", "--out", str(DATA / "heldout"))
+    return DATA
+
+
+@pytest.fixture(scope="session")
+def shipped_model() -> Path:
+    model = ROOT / "models" / "default"
+    assert (model / "model.json").exists(), "models/default is missing"
+    return model

@@ -1,0 +1,80 @@
+"""The trained network: de-lighting removes source light; training is reproducible
+and resumable; export matches PyTorch and loads in ONNX Runtime."""
+
+import json
+
+import numpy as np
+import onnxruntime as ort
+import torch
+
+from lsyd import contract, data, export, train
+
+
+def session(path):
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 1
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+
+
+def test_delighting_removes_the_source_light(sim_data, shipped_model):
+    """The de-lit features of one face under two monitor lights are measurably closer
+    than the raw encoder features (paper section 3.2)."""
+    m = contract.read(shipped_model / "model.json")
+    res = m["resolution"]
+    held = data.Heldout.load(sim_data / "heldout")
+    enc = session(shipped_model / "encoder.onnx")
+    delight = session(shipped_model / "delight.onnx")
+    light_encoder = session(shipped_model / "light_encoder.onnx")
+    ratios = []
+    for pose in range(held.images.shape[0]):
+        feats = []
+        for light in (0, 5):  # a bright outdoor map and a white text page
+            image = data.to_tensor(data.area_resize(held.clean[pose, light], res))[None].numpy()
+            raw = dict(zip([o.name for o in enc.get_outputs()], enc.run(None, {"image": image})))
+            (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
+            delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
+            feats.append(([raw[f"e{i}"] for i in range(1, 8)], delit))
+        (raw_a, del_a), (raw_b, del_b) = feats
+
+        def rel(a, b):
+            return np.mean(
+                [np.linalg.norm(x - y) / (0.5 * (np.linalg.norm(x) + np.linalg.norm(y))) for x, y in zip(a, b)]
+            )
+
+        ratios.append(rel(del_a, del_b) / rel(raw_a, raw_b))
+    assert np.median(ratios) < 0.9, ratios
+
+
+def tiny_config(steps: int) -> train.TrainConfig:
+    from lsyd import model
+
+    return train.TrainConfig(net=model.NetConfig(resolution=64, width=0.125), steps=steps, batch=4, pairs="both")
+
+
+def test_training_smoke_resume_and_export(sim_data, tmp_path):
+    torch.set_num_threads(2)
+    device = torch.device("cpu")
+    # Four steps in one go ...
+    train.train(tiny_config(4), sim_data, tmp_path / "straight", resume=False, checkpoint_every=2, device=device)
+    # ... and two, then two more after a resume, give the same weights.
+    train.train(tiny_config(2), sim_data, tmp_path / "resumed", resume=False, checkpoint_every=2, device=device)
+    cfg_path = tmp_path / "resumed" / "config.json"
+    cfg = json.loads(cfg_path.read_text())
+    cfg["steps"] = 4
+    cfg_path.write_text(json.dumps(cfg))
+    train.train(tiny_config(4), sim_data, tmp_path / "resumed", resume=True, checkpoint_every=2, device=device)
+    a = torch.load(tmp_path / "straight" / "checkpoint.pt", weights_only=False)["net"]
+    b = torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["net"]
+    for k in a:
+        assert torch.equal(a[k], b[k]), k
+    log = (tmp_path / "straight" / "log.csv").read_text().splitlines()
+    assert log[0].startswith("step,") and len(log) >= 2
+
+    # Export checks ONNX Runtime against PyTorch (max abs diff <= 1e-4) and writes the contract.
+    result = export.export(tmp_path / "straight", sim_data, tmp_path / "model")
+    assert max(result["parity"].values()) <= export.PARITY_TOLERANCE
+    specs = contract.stage_specs(64, result["config"].net.widths)
+    for name, spec in specs.items():
+        s = session(tmp_path / "model" / spec["file"])
+        assert [i.name for i in s.get_inputs()] == [t["name"] for t in spec["inputs"]], name
+        assert [o.name for o in s.get_outputs()] == [t["name"] for t in spec["outputs"]], name
