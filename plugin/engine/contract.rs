@@ -23,6 +23,10 @@ pub const STAGES: [&str; 5] = [
     "delight",
     "decoder",
 ];
+/// An optional stage: is the person in the face region at all?
+pub const PRESENCE_STAGE: &str = "presence";
+/// Side of the presence stage's input image.
+pub const PRESENCE_SIZE: usize = 64;
 /// De-lit features, which are smoothed over time.
 pub const SMOOTHED: [&str; 7] = ["f1", "f2", "f3", "f4", "f5", "f6", "f7"];
 /// Raw encoder features.
@@ -194,7 +198,16 @@ impl Manifest {
             check_tensors(name, "input", &stage.inputs, inputs)?;
             check_tensors(name, "output", &stage.outputs, outputs)?;
         }
-        if let Some(extra) = self.stages.keys().find(|k| !STAGES.contains(&k.as_str())) {
+        if let Some(stage) = self.stages.get(PRESENCE_STAGE) {
+            let (inputs, outputs) = &expected[PRESENCE_STAGE];
+            check_tensors(PRESENCE_STAGE, "input", &stage.inputs, inputs)?;
+            check_tensors(PRESENCE_STAGE, "output", &stage.outputs, outputs)?;
+        }
+        if let Some(extra) = self
+            .stages
+            .keys()
+            .find(|k| !STAGES.contains(&k.as_str()) && k.as_str() != PRESENCE_STAGE)
+        {
             return Err(mismatch(format!("unknown stage {extra}")));
         }
         Ok(())
@@ -245,6 +258,14 @@ impl Manifest {
         dec_in.push(t("stem", stem));
         dec_in.push(t("target_code", code));
         m.insert("decoder", (dec_in, vec![t("relit", vec![1, 3, r, r])]));
+        let p = PRESENCE_SIZE as i64;
+        m.insert(
+            PRESENCE_STAGE,
+            (
+                vec![t("image", vec![1, 3, p, p])],
+                vec![t("presence", vec![1, 1])],
+            ),
+        );
         m
     }
 }

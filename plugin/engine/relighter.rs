@@ -19,7 +19,7 @@ use ort::environment::Environment;
 use ort::session::Session;
 use ort::value::{DynValue, TensorRef};
 
-use super::contract::{CODE_DIM, Manifest, RAW, SMOOTHED};
+use super::contract::{CODE_DIM, Manifest, PRESENCE_SIZE, RAW, SMOOTHED};
 use super::runtime::{EngineError, Provider, Sessions, inference, load_model};
 use super::temporal::{FeatureSmoother, SourceLightAverager};
 use crate::light::{LIGHT_COLS, LIGHT_LEN, LIGHT_ROWS, Light};
@@ -67,9 +67,13 @@ pub struct FrameOutput {
 /// Counts of work done and skipped, for statistics.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct EngineCounts {
+    /// Frames the network ran on.
     pub frames: u64,
+    /// Frames whose relighting was reused (the network did not run).
+    pub skipped: u64,
     pub target_encodes: u64,
     pub predictions: u64,
+    pub presence_checks: u64,
     pub non_finite: u64,
 }
 
@@ -79,6 +83,8 @@ pub struct Relighter {
     averager: SourceLightAverager,
     smoother: FeatureSmoother,
     target: Option<(Light, Vec<f32>)>,
+    /// The source light of the last frame that ran the network, before averaging.
+    last_source: Option<Light>,
     counts: EngineCounts,
 }
 
@@ -124,6 +130,7 @@ impl Relighter {
             averager: SourceLightAverager::new(temporal.beta, temporal.average_frames),
             smoother: FeatureSmoother::new(temporal.alpha),
             target: None,
+            last_source: None,
             counts: EngineCounts::default(),
         })
     }
@@ -145,6 +152,56 @@ impl Relighter {
     pub fn reset(&mut self) {
         self.averager.reset();
         self.smoother.reset();
+        self.last_source = None;
+    }
+
+    /// The target light, if one is set.
+    pub fn target(&self) -> Option<&Light> {
+        self.target.as_ref().map(|(l, _)| l)
+    }
+
+    /// The source light the next frame would be de-lit with, if its own is `source`
+    /// (the last frame's own light when unknown), without changing any state.
+    pub fn peek_average(&self, source: &Source) -> Option<Light> {
+        let light = match source {
+            Source::Known(l) => l.clone(),
+            Source::Unknown => self.last_source.clone()?,
+        };
+        Some(self.averager.clone().push(light))
+    }
+
+    /// Accounts for a frame whose relighting was reused instead of computed: its
+    /// source light joins the average, and the smoothed features advance as if the
+    /// last frame's had been seen again, which is what a static scene gives.
+    pub fn skip_frame(&mut self, source: &Source) {
+        let light = match source {
+            Source::Known(l) => Some(l.clone()),
+            Source::Unknown => self.last_source.clone(),
+        };
+        if let Some(l) = light {
+            self.averager.push(l);
+        }
+        self.smoother.repeat_last();
+        self.counts.skipped += 1;
+    }
+
+    /// Whether the model can tell if the person is in view.
+    pub fn has_presence(&self) -> bool {
+        self.sessions.presence.is_some()
+    }
+
+    /// Probability that the person is in the face region; `image` is planar sRGB in
+    /// [0, 1], 3 × 64 × 64. None when the model has no presence stage.
+    pub fn presence(&mut self, image: &[f32]) -> Result<Option<f32>, EngineError> {
+        let Some(session) = self.sessions.presence.as_mut() else {
+            return Ok(None);
+        };
+        self.counts.presence_checks += 1;
+        let mut out = session
+            .run(ort::inputs!["image" => tensor([1, 3, PRESENCE_SIZE, PRESENCE_SIZE], image)?])
+            .map_err(inference)?;
+        let logit = values(&take(&mut out, "presence")?)?[0];
+        Ok(Some(1.0 / (1.0 + (-logit).exp())))
     }
 
     /// Changes the temporal filters; their state starts afresh.
@@ -231,6 +288,7 @@ impl Relighter {
             Source::Known(l) => l,
             Source::Unknown => predicted.clone().expect("predicted above"),
         };
+        self.last_source = Some(this_source.clone());
         let averaged = self.averager.push(this_source);
         let source_code = encode(&mut self.sessions.light_encoder, &averaged)?;
 

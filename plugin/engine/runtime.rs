@@ -14,7 +14,7 @@ use ort::session::Session;
 use ort::session::builder::GraphOptimizationLevel;
 use ort::value::{TensorElementType, ValueType};
 
-use super::contract::{ContractError, Manifest, STAGES, StageSpec, TensorSpec};
+use super::contract::{ContractError, Manifest, PRESENCE_STAGE, STAGES, StageSpec, TensorSpec};
 
 /// Which hardware runs the network.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -112,13 +112,15 @@ pub fn loaded_library() -> Option<&'static Path> {
     ENVIRONMENT.get().map(|l| l.library.as_path())
 }
 
-/// The five stage sessions of a model.
+/// The stage sessions of a model.
 pub struct Sessions {
     pub light_encoder: Session,
     pub encoder: Session,
     pub light_decoder: Session,
     pub delight: Session,
     pub decoder: Session,
+    /// The optional presence classifier.
+    pub presence: Option<Session>,
 }
 
 /// Loads and checks a model folder: the manifest, then every session against it.
@@ -136,6 +138,14 @@ pub fn load_model(
         check_session(name, spec, &session)?;
         sessions.push(session);
     }
+    let presence = match manifest.stages.get(PRESENCE_STAGE) {
+        Some(spec) => {
+            let session = open_session(env, &dir.join(&spec.file), 1, Provider::Cpu)?;
+            check_session(PRESENCE_STAGE, spec, &session)?;
+            Some(session)
+        }
+        None => None,
+    };
     let mut it = sessions.into_iter();
     let mut next = || it.next().expect("one session per stage");
     Ok((
@@ -146,6 +156,7 @@ pub fn load_model(
             light_decoder: next(),
             delight: next(),
             decoder: next(),
+            presence,
         },
     ))
 }

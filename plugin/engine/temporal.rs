@@ -67,6 +67,8 @@ impl SourceLightAverager {
 pub struct FeatureSmoother {
     alpha: f32,
     previous: Option<Vec<Vec<f32>>>,
+    /// The last processed frame's features before smoothing, for frames that are skipped.
+    last_raw: Option<Vec<Vec<f32>>>,
 }
 
 impl FeatureSmoother {
@@ -74,12 +76,14 @@ impl FeatureSmoother {
         Self {
             alpha: alpha.clamp(0.0, 1.0),
             previous: None,
+            last_raw: None,
         }
     }
 
     /// Smooths this frame's features in place and remembers them for the next frame.
     /// The first frame after a reset passes unchanged.
     pub fn smooth(&mut self, features: &mut [&mut [f32]]) {
+        keep_copy(&mut self.last_raw, features);
         if let Some(prev) = &self.previous
             && prev.len() == features.len()
             && prev
@@ -94,19 +98,25 @@ impl FeatureSmoother {
                 }
             }
         }
-        match &mut self.previous {
-            Some(prev) if prev.len() == features.len() => {
-                for (p, f) in prev.iter_mut().zip(features.iter()) {
-                    p.clear();
-                    p.extend_from_slice(f);
+        keep_copy(&mut self.previous, features);
+    }
+
+    /// Advances the state for a skipped frame, as if the last processed frame's
+    /// features had been seen again: what a static scene would have given.
+    pub fn repeat_last(&mut self) {
+        if let (Some(prev), Some(raw)) = (&mut self.previous, &self.last_raw) {
+            let (a, b) = (self.alpha, 1.0 - self.alpha);
+            for (p, r) in prev.iter_mut().zip(raw) {
+                for (x, y) in p.iter_mut().zip(r) {
+                    *x = a * y + b * *x;
                 }
             }
-            _ => self.previous = Some(features.iter().map(|f| f.to_vec()).collect()),
         }
     }
 
     pub fn reset(&mut self) {
         self.previous = None;
+        self.last_raw = None;
     }
 
     pub fn has_state(&self) -> bool {
@@ -116,6 +126,19 @@ impl FeatureSmoother {
     /// The last frame's smoothed features, which the next frame is smoothed with.
     pub fn state(&self) -> Option<&[Vec<f32>]> {
         self.previous.as_deref()
+    }
+}
+
+/// Copies `features` into `slot`, reusing its allocations.
+fn keep_copy(slot: &mut Option<Vec<Vec<f32>>>, features: &[&mut [f32]]) {
+    match slot {
+        Some(v) if v.len() == features.len() => {
+            for (p, f) in v.iter_mut().zip(features) {
+                p.clear();
+                p.extend_from_slice(f);
+            }
+        }
+        _ => *slot = Some(features.iter().map(|f| f.to_vec()).collect()),
     }
 }
 
@@ -158,6 +181,24 @@ mod tests {
         let mut k = vec![5.0f32; 4];
         s.smooth(&mut [&mut k]);
         assert_eq!(k, vec![5.0; 4]);
+    }
+
+    #[test]
+    fn skipped_frames_repeat_the_last_features() {
+        let mut skipping = FeatureSmoother::new(0.7);
+        let mut every = FeatureSmoother::new(0.7);
+        let mut a = vec![1.0f32; 3];
+        let mut b = vec![0.0f32; 3];
+        skipping.smooth(&mut [&mut a.clone()]);
+        every.smooth(&mut [&mut a]);
+        skipping.smooth(&mut [&mut b.clone()]);
+        every.smooth(&mut [&mut b]);
+        // Two more frames equal to the last: processed by one, skipped by the other.
+        for _ in 0..2 {
+            every.smooth(&mut [&mut vec![0.0f32; 3]]);
+            skipping.repeat_last();
+        }
+        assert_eq!(skipping.state(), every.state());
     }
 
     #[test]

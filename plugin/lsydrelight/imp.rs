@@ -23,6 +23,7 @@ use gst_video::VideoFormat;
 use gst_video::prelude::*;
 
 use super::ExecutionProvider;
+use crate::engine::contract::PRESENCE_SIZE;
 use crate::engine::{self, FrameOutput, Provider, Relighter, Source, Temporal};
 use crate::frame::{
     Crop, Frame, FrameMut, LightingChange, PixelFormat, Plane, YuvMatrix, sample_crop,
@@ -65,6 +66,19 @@ const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
 const DEFAULT_FEATHER: f64 = 0.06;
+// The skips' defaults come from the benchmark's skip table (README, "Skipping what a
+// scene does not need"): each is on where it pays within the error budget.
+const DEFAULT_SKIP_STATIC: bool = true;
+/// Mean absolute change of the network's input (sRGB, [0, 1]) below which a frame reuses the last relighting.
+const DEFAULT_STATIC_THRESHOLD: f64 = 0.004;
+/// Mean absolute change of the averaged source light (linear) allowed for that reuse.
+const DEFAULT_STATIC_LIGHT_THRESHOLD: f64 = 0.002;
+const DEFAULT_SKIP_SAME_LIGHT: bool = true;
+/// Mean absolute difference (linear light) under which source and target count as the same.
+const DEFAULT_SAME_LIGHT_TOLERANCE: f64 = 0.004;
+const DEFAULT_SKIP_ABSENT: bool = true;
+const DEFAULT_PRESENCE_THRESHOLD: f64 = 0.5;
+const DEFAULT_QOS: bool = true;
 
 #[derive(Debug, Clone)]
 struct Settings {
@@ -83,6 +97,14 @@ struct Settings {
     crop_size: f64,
     feather: f64,
     reset_gap: gst::ClockTime,
+    skip_static: bool,
+    static_threshold: f64,
+    static_light_threshold: f64,
+    skip_same_light: bool,
+    same_light_tolerance: f64,
+    skip_absent: bool,
+    presence_threshold: f64,
+    qos: bool,
 }
 
 impl Default for Settings {
@@ -102,6 +124,14 @@ impl Default for Settings {
             crop_size: DEFAULT_CROP_SIZE,
             feather: DEFAULT_FEATHER,
             reset_gap: DEFAULT_RESET_GAP,
+            skip_static: DEFAULT_SKIP_STATIC,
+            static_threshold: DEFAULT_STATIC_THRESHOLD,
+            static_light_threshold: DEFAULT_STATIC_LIGHT_THRESHOLD,
+            skip_same_light: DEFAULT_SKIP_SAME_LIGHT,
+            same_light_tolerance: DEFAULT_SAME_LIGHT_TOLERANCE,
+            skip_absent: DEFAULT_SKIP_ABSENT,
+            presence_threshold: DEFAULT_PRESENCE_THRESHOLD,
+            qos: DEFAULT_QOS,
         }
     }
 }
@@ -160,6 +190,10 @@ struct Stats {
     frames: u64,
     relit: u64,
     passed_through: u64,
+    skipped_absent: u64,
+    skipped_same_light: u64,
+    skipped_static: u64,
+    qos_reused: u64,
     known_source: u64,
     predicted_source: u64,
     fallbacks: u64,
@@ -175,6 +209,42 @@ struct State {
     target_generation: u64,
     face_info: Option<gst_video::VideoInfo>,
     last_face_rt: Option<gst::ClockTime>,
+    /// The last frame the network ran on, whose lighting change a skipped frame reuses.
+    last: Option<Processed>,
+}
+
+/// What a frame the network ran on leaves for the frames that reuse it.
+struct Processed {
+    /// The network's input and the averaged source light.
+    image: Vec<f32>,
+    average: Light,
+    change: LightingChange,
+    crop: Crop,
+    predicted: Option<Light>,
+}
+
+/// The work a frame gets.
+enum FramePath {
+    /// Nobody is in the face region: pass through.
+    Absent,
+    /// The source light is the target light: pass through.
+    SameLight,
+    /// Apply the last frame's lighting change.
+    Reuse(Reuse),
+    /// Run the network.
+    Full,
+}
+
+enum Reuse {
+    /// The face region and the source light barely changed.
+    Static,
+    /// The frame is already late (QoS).
+    Late,
+}
+
+/// Mean absolute difference of two images of the same size.
+fn mean_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f32>() / a.len() as f32
 }
 
 /// Items for `monitor_src`'s task, in order.
@@ -271,6 +341,10 @@ pub struct LsydRelight {
     stats: Mutex<Stats>,
     /// The engine's counts as of the last frame, likewise kept after stop.
     engine_counts: Mutex<engine::EngineCounts>,
+    /// Downstream's earliest useful running time, from its QoS events.
+    qos_earliest: Mutex<Option<gst::ClockTime>>,
+    /// Whether upstream is live, from the latency query.
+    live: std::sync::atomic::AtomicBool,
     monitor: Mutex<MonitorTrack>,
     face_stream_id: Mutex<Option<glib::GString>>,
 }
@@ -583,23 +657,15 @@ impl LsydRelight {
         }
     }
 
-    /// Relights one face buffer in place (a copy, when upstream still holds it).
-    fn process_frame(
+    /// Brings the temporal state and the target up to date for the next frame:
+    /// resets after a break in the stream, new filter settings, a new target.
+    fn update_state(
         &self,
-        mut buffer: gst::Buffer,
-        source: Source,
+        state: &mut State,
+        stats: &mut Stats,
+        buffer: &gst::Buffer,
         s: &Settings,
-    ) -> Result<gst::Buffer, gst::FlowError> {
-        let mut guard = lock(&self.state);
-        let state = guard.as_mut().ok_or(gst::FlowError::Flushing)?;
-        let info = state
-            .face_info
-            .clone()
-            .ok_or(gst::FlowError::NotNegotiated)?;
-        let mut stats = lock(&self.stats);
-        stats.frames += 1;
-
-        // Temporal state follows the stream: start afresh after a break in it.
+    ) {
         let rt = running_time(&self.face_pad, buffer.pts());
         let gap = match (state.last_face_rt, rt) {
             (Some(a), Some(b)) => a.nseconds().abs_diff(b.nseconds()) > s.reset_gap.nseconds(),
@@ -607,6 +673,7 @@ impl LsydRelight {
         };
         if buffer.flags().contains(gst::BufferFlags::DISCONT) || gap {
             state.relighter.reset();
+            state.last = None;
             stats.resets += 1;
             gst::debug!(CAT, imp = self, "reset temporal state at a discontinuity");
         }
@@ -614,6 +681,7 @@ impl LsydRelight {
         if state.temporal != s.temporal {
             state.relighter.set_temporal(s.temporal);
             state.temporal = s.temporal;
+            state.last = None;
         }
         if state.target_generation != s.target_generation {
             match load_target(&s.target_location)
@@ -633,61 +701,217 @@ impl LsydRelight {
                 ),
             }
             state.target_generation = s.target_generation;
+            state.last = None;
         }
+    }
+
+    /// Which work this frame needs.
+    fn choose_path(
+        &self,
+        state: &mut State,
+        frame: &Frame,
+        crop: Crop,
+        image: &[f32],
+        source: &Source,
+        late: bool,
+        s: &Settings,
+    ) -> Result<FramePath, gst::FlowError> {
+        if s.skip_absent && state.relighter.has_presence() {
+            let small = sample_crop(frame, crop, PRESENCE_SIZE);
+            let p = state
+                .relighter
+                .presence(&small)
+                .map_err(|e| self.engine_failed(e))?;
+            if p.is_some_and(|p| p < s.presence_threshold as f32) {
+                return Ok(FramePath::Absent);
+            }
+        }
+        let average = state.relighter.peek_average(source);
+        if s.skip_same_light
+            && let (Some(avg), Some(target)) = (&average, state.relighter.target())
+            && avg.distance(target) <= s.same_light_tolerance as f32
+        {
+            return Ok(FramePath::SameLight);
+        }
+        if let Some(last) = &state.last
+            && last.crop == crop
+        {
+            if late && s.qos {
+                return Ok(FramePath::Reuse(Reuse::Late));
+            }
+            let light_change = match (&average, &last.average) {
+                (Some(a), b) => a.distance(b),
+                (None, _) => f32::INFINITY,
+            };
+            if s.skip_static
+                && mean_abs_diff(image, &last.image) <= s.static_threshold as f32
+                && light_change <= s.static_light_threshold as f32
+            {
+                return Ok(FramePath::Reuse(Reuse::Static));
+            }
+        }
+        Ok(FramePath::Full)
+    }
+
+    /// In a live pipeline: is a frame of this running time already past its deadline,
+    /// by the clock or by downstream's QoS?
+    fn is_late(&self, rt: Option<gst::ClockTime>, duration: Option<gst::ClockTime>) -> bool {
+        let Some(rt) = rt else { return false };
+        let frame = duration.unwrap_or(gst::ClockTime::from_mseconds(33));
+        if let Some(earliest) = *lock(&self.qos_earliest)
+            && rt + frame < earliest
+        {
+            return true;
+        }
+        let obj = self.obj();
+        let (Some(clock), Some(base)) = (obj.clock(), obj.base_time()) else {
+            return false;
+        };
+        if !self.live.load(std::sync::atomic::Ordering::Relaxed) {
+            return false;
+        }
+        let latency = obj.latency().unwrap_or(gst::ClockTime::ZERO);
+        let now = clock.time().saturating_sub(base);
+        now > rt + latency + frame
+    }
+
+    fn post_qos(&self, buffer: &gst::Buffer, rt: Option<gst::ClockTime>) {
+        let stats = *lock(&self.stats);
+        let segment = self.face_pad.segment();
+        let stream_time = segment
+            .downcast_ref::<gst::ClockTime>()
+            .and_then(|s| s.to_stream_time(buffer.pts()?));
+        let msg = gst::message::Qos::builder(true)
+            .running_time(rt)
+            .stream_time(stream_time)
+            .timestamp(buffer.pts())
+            .duration(buffer.duration())
+            .stats(
+                gst::format::Buffers::from_u64(stats.frames - stats.qos_reused),
+                gst::format::Buffers::from_u64(stats.qos_reused),
+            )
+            .src(&*self.obj())
+            .build();
+        let _ = self.obj().post_message(msg);
+    }
+
+    fn engine_failed(&self, e: engine::EngineError) -> gst::FlowError {
+        gst::element_imp_error!(self, gst::StreamError::Failed, ("Relighting failed: {}", e));
+        gst::FlowError::Error
+    }
+
+    /// Relights one face buffer in place (a copy, when upstream still holds it).
+    /// `late` says the frame is already behind its deadline (QoS).
+    fn process_frame(
+        &self,
+        mut buffer: gst::Buffer,
+        source: Source,
+        late: bool,
+        s: &Settings,
+    ) -> Result<gst::Buffer, gst::FlowError> {
+        let mut guard = lock(&self.state);
+        let state = guard.as_mut().ok_or(gst::FlowError::Flushing)?;
+        let info = state
+            .face_info
+            .clone()
+            .ok_or(gst::FlowError::NotNegotiated)?;
+        let mut stats = lock(&self.stats);
+        stats.frames += 1;
+        self.update_state(state, &mut stats, &buffer, s);
 
         let (w, h) = (info.width() as usize, info.height() as usize);
         let crop = Crop::centred(w, h, s.crop_x, s.crop_y, s.crop_size);
         let res = state.relighter.resolution();
-        let image = {
+        let (image, path) = {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
-            sample_crop(&view, crop, res)
+            let image = sample_crop(&view, crop, res);
+            let path = self.choose_path(state, &view, crop, &image, &source, late, s)?;
+            (image, path)
         };
-        let want_prediction = self.monitor_src.is_linked();
         match &source {
             Source::Known(_) => stats.known_source += 1,
             Source::Unknown => stats.predicted_source += 1,
         }
-        let out: FrameOutput = state
-            .relighter
-            .process(&image, source, want_prediction)
-            .map_err(|e| {
-                gst::element_imp_error!(
-                    self,
-                    gst::StreamError::Failed,
-                    ("Relighting failed: {}", e)
-                );
-                gst::FlowError::Error
-            })?;
-        *lock(&self.engine_counts) = state.relighter.counts();
-        let matrix = yuv_matrix(&info);
-        match &out.relit {
-            Some(relit) => {
-                let format = pixel_format(info.format()).ok_or(gst::FlowError::NotNegotiated)?;
-                let change = LightingChange::new(&image, relit, res, format, matrix);
-                let feather = (s.feather * crop.size as f64).round() as usize;
-                let buf = buffer.make_mut();
-                let mut frame = gst_video::VideoFrameRef::from_buffer_ref_writable(buf, &info)
-                    .map_err(|_| gst::FlowError::Error)?;
+        let want_prediction = self.monitor_src.is_linked();
+        let feather = (s.feather * crop.size as f64).round() as usize;
+        let apply =
+            |buffer: &mut gst::Buffer, change: &LightingChange| -> Result<(), gst::FlowError> {
+                let mut frame =
+                    gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
+                        .map_err(|_| gst::FlowError::Error)?;
                 with_frame_mut(&mut frame, |fm| change.apply(fm, crop, feather));
-                stats.relit += 1;
+                Ok(())
+            };
+        let predicted = match path {
+            FramePath::Absent => {
+                // Nobody there: pass the frame through. The pose will have changed by
+                // the time the person is back, so their temporal state must not carry over.
+                stats.skipped_absent += 1;
+                state.relighter.reset();
+                state.last = None;
+                None
             }
-            None => {
-                stats.passed_through += 1;
-                gst::element_imp_warning!(
-                    self,
-                    gst::StreamError::Decode,
-                    ("The model produced NaN or Inf; passing this frame through unchanged"),
-                    ["The engine restarts its temporal state and relights the next frame afresh."]
-                );
+            FramePath::SameLight => {
+                stats.skipped_same_light += 1;
+                state.relighter.skip_frame(&source);
+                state.last.as_ref().and_then(|l| l.predicted.clone())
             }
-        }
+            FramePath::Reuse(why) => {
+                match why {
+                    Reuse::Static => stats.skipped_static += 1,
+                    Reuse::Late => stats.qos_reused += 1,
+                }
+                state.relighter.skip_frame(&source);
+                let last = state.last.as_ref().expect("reuse needs a processed frame");
+                apply(&mut buffer, &last.change)?;
+                last.predicted.clone()
+            }
+            FramePath::Full => {
+                let average = state.relighter.peek_average(&source);
+                let out: FrameOutput = state
+                    .relighter
+                    .process(&image, source, want_prediction)
+                    .map_err(|e| self.engine_failed(e))?;
+                match &out.relit {
+                    Some(relit) => {
+                        let format =
+                            pixel_format(info.format()).ok_or(gst::FlowError::NotNegotiated)?;
+                        let change =
+                            LightingChange::new(&image, relit, res, format, yuv_matrix(&info));
+                        apply(&mut buffer, &change)?;
+                        stats.relit += 1;
+                        state.last = Some(Processed {
+                            image,
+                            average: average.unwrap_or_else(|| out.source.clone()),
+                            change,
+                            crop,
+                            predicted: out.predicted.clone(),
+                        });
+                    }
+                    None => {
+                        stats.passed_through += 1;
+                        state.last = None;
+                        gst::element_imp_warning!(
+                            self,
+                            gst::StreamError::Decode,
+                            ("The model produced NaN or Inf; passing this frame through unchanged"),
+                            [
+                                "The engine restarts its temporal state and relights the next frame afresh."
+                            ]
+                        );
+                    }
+                }
+                out.predicted
+            }
+        };
+        *lock(&self.engine_counts) = state.relighter.counts();
         let pts = buffer.pts();
         let duration = buffer.duration();
         drop(stats);
         drop(guard);
-        if want_prediction && let Some(pred) = out.predicted {
+        if want_prediction && let Some(pred) = predicted {
             self.push_monitor(&pred, pts, duration, info.fps());
         }
         Ok(buffer)
@@ -772,6 +996,10 @@ impl LsydRelight {
             .field("frames", s.frames)
             .field("relit", s.relit)
             .field("passed-through", s.passed_through)
+            .field("skipped-absent", s.skipped_absent)
+            .field("skipped-same-light", s.skipped_same_light)
+            .field("skipped-static", s.skipped_static)
+            .field("qos-reused", s.qos_reused)
             .field("known-source", s.known_source)
             .field("predicted-source", s.predicted_source)
             .field("fallbacks", s.fallbacks)
@@ -858,6 +1086,8 @@ impl ObjectSubclass for LsydRelight {
             state: Mutex::new(None),
             stats: Mutex::new(Stats::default()),
             engine_counts: Mutex::new(Default::default()),
+            qos_earliest: Mutex::new(None),
+            live: std::sync::atomic::AtomicBool::new(false),
             monitor: Mutex::new(MonitorTrack::default()),
             face_stream_id: Mutex::new(None),
         }
@@ -974,6 +1204,62 @@ impl ObjectImpl for LsydRelight {
                     .default_value(DEFAULT_RESET_GAP.nseconds())
                     .mutable_playing()
                     .build(),
+                glib::ParamSpecBoolean::builder("skip-static")
+                    .nick("Skip static scenes")
+                    .blurb("Reuse the last relighting while the face region and the source light barely change (thresholds below)")
+                    .default_value(DEFAULT_SKIP_STATIC)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecDouble::builder("static-threshold")
+                    .nick("Static image threshold")
+                    .blurb("Mean absolute change of the network's input (sRGB in [0, 1]) since the last relit frame below which the scene counts as static")
+                    .minimum(0.0)
+                    .maximum(1.0)
+                    .default_value(DEFAULT_STATIC_THRESHOLD)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecDouble::builder("static-light-threshold")
+                    .nick("Static light threshold")
+                    .blurb("Mean absolute change of the averaged source light (linear) below which the light counts as unchanged")
+                    .minimum(0.0)
+                    .maximum(1.0)
+                    .default_value(DEFAULT_STATIC_LIGHT_THRESHOLD)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecBoolean::builder("skip-same-light")
+                    .nick("Skip when source is target")
+                    .blurb("Pass frames through when the source light equals the target light within same-light-tolerance")
+                    .default_value(DEFAULT_SKIP_SAME_LIGHT)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecDouble::builder("same-light-tolerance")
+                    .nick("Same light tolerance")
+                    .blurb("Mean absolute difference of source and target light (linear) under which they count as the same")
+                    .minimum(0.0)
+                    .maximum(1.0)
+                    .default_value(DEFAULT_SAME_LIGHT_TOLERANCE)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecBoolean::builder("skip-absent")
+                    .nick("Skip when nobody is there")
+                    .blurb("Pass frames through untouched while the model's presence stage sees nobody in the face region (the user walked away)")
+                    .default_value(DEFAULT_SKIP_ABSENT)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecDouble::builder("presence-threshold")
+                    .nick("Presence threshold")
+                    .blurb("Probability of someone being in the face region below which nobody counts as there")
+                    .minimum(0.0)
+                    .maximum(1.0)
+                    .default_value(DEFAULT_PRESENCE_THRESHOLD)
+                    .mutable_playing()
+                    .build(),
+                glib::ParamSpecBoolean::builder("qos")
+                    .nick("QoS")
+                    .blurb("In live pipelines, reuse the last relighting for frames that are already late instead of falling further behind, and post QoS messages")
+                    .default_value(DEFAULT_QOS)
+                    .mutable_playing()
+                    .build(),
                 glib::ParamSpecBoxed::builder::<gst::Structure>("stats")
                     .nick("Statistics")
                     .blurb("Frames processed, relit and passed through, source lights used, monitor fallbacks, resets, and work done")
@@ -1015,6 +1301,16 @@ impl ObjectImpl for LsydRelight {
             "reset-gap" => {
                 s.reset_gap = gst::ClockTime::from_nseconds(value.get().expect("type checked"))
             }
+            "skip-static" => s.skip_static = value.get().expect("type checked"),
+            "static-threshold" => s.static_threshold = value.get().expect("type checked"),
+            "static-light-threshold" => {
+                s.static_light_threshold = value.get().expect("type checked")
+            }
+            "skip-same-light" => s.skip_same_light = value.get().expect("type checked"),
+            "same-light-tolerance" => s.same_light_tolerance = value.get().expect("type checked"),
+            "skip-absent" => s.skip_absent = value.get().expect("type checked"),
+            "presence-threshold" => s.presence_threshold = value.get().expect("type checked"),
+            "qos" => s.qos = value.get().expect("type checked"),
             other => unreachable!("unknown property {other}"),
         }
     }
@@ -1038,6 +1334,14 @@ impl ObjectImpl for LsydRelight {
             "crop-size" => s.crop_size.to_value(),
             "feather" => s.feather.to_value(),
             "reset-gap" => s.reset_gap.nseconds().to_value(),
+            "skip-static" => s.skip_static.to_value(),
+            "static-threshold" => s.static_threshold.to_value(),
+            "static-light-threshold" => s.static_light_threshold.to_value(),
+            "skip-same-light" => s.skip_same_light.to_value(),
+            "same-light-tolerance" => s.same_light_tolerance.to_value(),
+            "skip-absent" => s.skip_absent.to_value(),
+            "presence-threshold" => s.presence_threshold.to_value(),
+            "qos" => s.qos.to_value(),
             "stats" => {
                 drop(s);
                 self.stats().to_value()
@@ -1191,6 +1495,7 @@ impl AggregatorImpl for LsydRelight {
             target_generation: s.target_generation,
             face_info: None,
             last_face_rt: None,
+            last: None,
         });
         *lock(&self.stats) = Stats::default();
         *lock(&self.engine_counts) = Default::default();
@@ -1204,6 +1509,7 @@ impl AggregatorImpl for LsydRelight {
     }
 
     fn stop(&self) -> Result<(), gst::ErrorMessage> {
+        *lock(&self.qos_earliest) = None;
         *lock(&self.state) = None;
         *lock(&self.monitor) = MonitorTrack::default();
         self.side.reset();
@@ -1331,6 +1637,27 @@ impl AggregatorImpl for LsydRelight {
         }
     }
 
+    fn src_query(&self, query: &mut gst::QueryRef) -> bool {
+        let handled = self.parent_src_query(query);
+        if handled && let gst::QueryView::Latency(q) = query.view() {
+            self.live
+                .store(q.result().0, std::sync::atomic::Ordering::Relaxed);
+        }
+        handled
+    }
+
+    fn src_event(&self, event: gst::Event) -> bool {
+        if let gst::EventView::Qos(q) = event.view() {
+            // As the base classes do: skip what downstream will only drop.
+            let (_, _, diff, timestamp) = q.get();
+            *lock(&self.qos_earliest) = timestamp.map(|t| {
+                let late = if diff > 0 { 2 * diff } else { diff };
+                gst::ClockTime::from_nseconds((t.nseconds() as i64 + late).max(0) as u64)
+            });
+        }
+        self.parent_src_event(event)
+    }
+
     fn update_src_caps(&self, _caps: &gst::Caps) -> Result<gst::Caps, gst::FlowError> {
         self.face_pad
             .current_caps()
@@ -1373,7 +1700,11 @@ impl AggregatorImpl for LsydRelight {
             .face_pad
             .pop_buffer()
             .ok_or(gst_base::AGGREGATOR_FLOW_NEED_DATA)?;
-        let mut out = self.process_frame(buffer, source, &s)?;
+        let late = s.qos && self.is_late(face_rt, buffer.duration());
+        let mut out = self.process_frame(buffer, source, late, &s)?;
+        if late {
+            self.post_qos(&out, face_rt);
+        }
         if let Some(rt) = monitor_rt {
             // Tells downstream which monitor frame lit this one, by its running time.
             gst::ReferenceTimestampMeta::add(

@@ -257,6 +257,40 @@ pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize)
     crate::io::write_npy(&dir.join("truth.npy"), &[poses, 10], &truth)
 }
 
+/// Writes `frames` webcam frames of the empty desk (the person away) under random
+/// monitor content and room light: `face.npy` (frames, S, S, 3).
+pub fn write_absent(dir: &Path, spec: &CaptureSpec, frames: usize) -> io::Result<()> {
+    fs::create_dir_all(dir)?;
+    let r = Renderer::new(Scene::new(
+        Subject::from_seed(spec.subject_seed),
+        spec.size,
+        spec.size,
+    ))
+    .map_err(io::Error::other)?;
+    let s = spec.size;
+    let mut face = crate::io::NpyWriter::<u8>::create(&dir.join("face.npy"), &[frames, s, s, 3])?;
+    let mut rng = Rng::stream(spec.seed, "absent");
+    let away = State {
+        pose: Pose {
+            present: false,
+            ..Pose::default()
+        },
+        expression: Expression::default(),
+    };
+    for i in 0..frames {
+        let look = Look::random(spec.seed, &format!("absent-{}", i % 16));
+        let shown = Playlist::still(Clip::random(&mut rng)).frame(0.0);
+        let transport = r.prepare(&look, &away);
+        let img = r.render(&transport, &[&light_of(&r, &shown)]).remove(0);
+        face.append(
+            &Sensor::default()
+                .capture(&img, hash(spec.seed, &[label("absent")]), i as u64)
+                .data,
+        )?;
+    }
+    face.finish()
+}
+
 /// The nine held-out pose-expression combinations. None lies on a training
 /// trajectory: they are fixed here, not drawn from the training streams.
 pub fn heldout_states() -> Vec<State> {

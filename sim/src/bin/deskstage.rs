@@ -4,6 +4,7 @@
 //! deskstage captures  --out DIR [--sessions N] [--seconds S] [--fps F] [--seed N] [--subject N]
 //! deskstage paired    --out DIR [--poses N] [--lights N] [--subject N]
 //! deskstage heldout   --out DIR [--subject N]
+//! deskstage absent    --out DIR [--frames N]   (the empty desk: the person away)
 //! deskstage recording --out DIR --name steady|slow|cuts|walkaway|call [--frames N] [--width W --height H]
 //! deskstage sheet     --out FILE.png [--subject N]
 //! deskstage targets   --out DIR      (the target monitor lights as PNG: studio, sunset, left-key)
@@ -103,6 +104,7 @@ fn run(a: &Args) -> Result<(), String> {
                 .map_err(io)
         }
         "heldout" => dataset::write_heldout(&a.out()?, subject, spec.size).map_err(io),
+        "absent" => dataset::write_absent(&a.out()?, &spec, a.num("frames", 400)?).map_err(io),
         "recording" => {
             let name: String = a.num("name", String::new())?;
             let mut r = RecordingSpec::standard(&name).ok_or(format!(
@@ -135,6 +137,7 @@ fn run(a: &Args) -> Result<(), String> {
             dataset::write_paired(&out.join("paired"), &spec, a.num("poses", 600)?, 4)
                 .map_err(io)?;
             dataset::write_heldout(&out.join("heldout"), subject, spec.size).map_err(io)?;
+            dataset::write_absent(&out.join("absent"), &spec, a.num("absent", 400)?).map_err(io)?;
             for name in RecordingSpec::STANDARD {
                 let mut r = RecordingSpec::standard(name).expect("standard recording");
                 r.subject_seed = subject;
