@@ -195,7 +195,7 @@ mod tests {
         every.smooth(&mut [&mut b]);
         // Two more frames equal to the last: processed by one, skipped by the other.
         for _ in 0..2 {
-            every.smooth(&mut [&mut vec![0.0f32; 3]]);
+            every.smooth(&mut [&mut [0.0f32; 3]]);
             skipping.repeat_last();
         }
         assert_eq!(skipping.state(), every.state());

@@ -223,6 +223,18 @@ struct Processed {
     predicted: Option<Light>,
 }
 
+/// What is known about a frame when its path is chosen.
+#[derive(Clone, Copy)]
+struct FrameInput<'a> {
+    frame: &'a Frame<'a>,
+    crop: Crop,
+    /// The network's input.
+    image: &'a [f32],
+    source: &'a Source,
+    /// Already past its deadline (QoS).
+    late: bool,
+}
+
 /// The work a frame gets.
 enum FramePath {
     /// Nobody is in the face region: pass through.
@@ -709,13 +721,16 @@ impl LsydRelight {
     fn choose_path(
         &self,
         state: &mut State,
-        frame: &Frame,
-        crop: Crop,
-        image: &[f32],
-        source: &Source,
-        late: bool,
+        f: &FrameInput,
         s: &Settings,
     ) -> Result<FramePath, gst::FlowError> {
+        let FrameInput {
+            frame,
+            crop,
+            image,
+            source,
+            late,
+        } = *f;
         if s.skip_absent && state.relighter.has_presence() {
             let small = sample_crop(frame, crop, PRESENCE_SIZE);
             let p = state
@@ -827,7 +842,14 @@ impl LsydRelight {
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
             let image = sample_crop(&view, crop, res);
-            let path = self.choose_path(state, &view, crop, &image, &source, late, s)?;
+            let input = FrameInput {
+                frame: &view,
+                crop,
+                image: &image,
+                source: &source,
+                late,
+            };
+            let path = self.choose_path(state, &input, s)?;
             (image, path)
         };
         match &source {
