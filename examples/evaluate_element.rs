@@ -38,7 +38,10 @@ fn main() -> Result<(), String> {
     );
     println!("|---|---|---|---|---|---|---|");
     for target in ["studio", "sunset", "left-key"] {
-        let props = [("model-location", glib::Value::from(model.to_str().unwrap()))];
+        let props = [(
+            "model-location",
+            model.to_str().ok_or("model path is not UTF-8")?,
+        )];
         let s = common::score_recording(&dir, target, true, &props)?;
         println!(
             "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |",

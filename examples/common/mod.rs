@@ -45,6 +45,22 @@ pub struct Score {
     pub change_rmse: f64,
     /// Per-frame processing time of the pipeline, wall clock.
     pub ms_per_frame: f64,
+    /// The element's `stats` at the end.
+    pub stats: serde_json::Value,
+}
+
+/// A structure of numbers as JSON.
+pub fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
+    let mut m = serde_json::Map::new();
+    for (k, v) in s.iter() {
+        let n = v
+            .get::<u64>()
+            .map(serde_json::Value::from)
+            .or_else(|_| v.get::<f64>().map(serde_json::Value::from))
+            .unwrap_or(serde_json::Value::Null);
+        m.insert(k.to_string(), n);
+    }
+    serde_json::Value::Object(m)
 }
 
 fn sq_err(a: &RgbImage, b: &RgbImage, region: Option<(usize, usize, usize)>) -> (f64, usize) {
@@ -81,12 +97,12 @@ fn sample_to_image(sample: &gst::Sample) -> RgbImage {
 
 /// Relights `<dir>/face.y4m` (with `<dir>/monitor.y4m` unless `with_monitor` is false)
 /// to the target `<dir>/target-<target>.png` and scores it against `<dir>/truth-<target>.y4m`.
-/// `properties` are set on the element.
+/// `properties` are set on the element from strings, as gst-launch does.
 pub fn score_recording(
     dir: &Path,
     target: &str,
     with_monitor: bool,
-    properties: &[(&str, glib::Value)],
+    properties: &[(&str, &str)],
 ) -> Result<Score, String> {
     init();
     let monitor = if with_monitor {
@@ -112,7 +128,7 @@ pub fn score_recording(
         dir.join(format!("target-{target}.png")).to_str().unwrap(),
     );
     for (k, v) in properties {
-        r.set_property_from_value(k, v);
+        r.set_property_from_str(k, v);
     }
     let sink = pipeline
         .by_name("out")
@@ -173,6 +189,7 @@ pub fn score_recording(
         score.frames += 1;
     };
     let elapsed = started.elapsed();
+    score.stats = structure_json(&r.property::<gst::Structure>("stats"));
     let bus_error = pipeline
         .bus()
         .and_then(|b| b.pop_filtered(&[gst::MessageType::Error]));

@@ -194,6 +194,9 @@ struct Stats {
     skipped_same_light: u64,
     skipped_static: u64,
     qos_reused: u64,
+    /// Seconds spent per frame in all, and in the network's stages.
+    processing_seconds: f64,
+    network_seconds: f64,
     known_source: u64,
     predicted_source: u64,
     fallbacks: u64,
@@ -556,9 +559,13 @@ impl LsydRelight {
     /// Forgets temporal state: after flushes, seeks, discontinuities, caps changes and gaps.
     fn reset_state(&self, why: &str) {
         if let Some(s) = lock(&self.state).as_mut() {
+            // Only a reset that forgets something counts.
+            if s.relighter.has_history() {
+                lock(&self.stats).resets += 1;
+            }
             s.relighter.reset();
             s.last_face_rt = None;
-            lock(&self.stats).resets += 1;
+            s.last = None;
         }
         lock(&self.monitor).current = None;
         gst::debug!(CAT, imp = self, "reset temporal state: {why}");
@@ -683,7 +690,9 @@ impl LsydRelight {
             (Some(a), Some(b)) => a.nseconds().abs_diff(b.nseconds()) > s.reset_gap.nseconds(),
             _ => false,
         };
-        if buffer.flags().contains(gst::BufferFlags::DISCONT) || gap {
+        if (buffer.flags().contains(gst::BufferFlags::DISCONT) || gap)
+            && state.relighter.has_history()
+        {
             state.relighter.reset();
             state.last = None;
             stats.resets += 1;
@@ -824,6 +833,7 @@ impl LsydRelight {
         late: bool,
         s: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
+        let started = std::time::Instant::now();
         let mut guard = lock(&self.state);
         let state = guard.as_mut().ok_or(gst::FlowError::Flushing)?;
         let info = state
@@ -892,10 +902,12 @@ impl LsydRelight {
             }
             FramePath::Full => {
                 let average = state.relighter.peek_average(&source);
+                let network = std::time::Instant::now();
                 let out: FrameOutput = state
                     .relighter
                     .process(&image, source, want_prediction)
                     .map_err(|e| self.engine_failed(e))?;
+                stats.network_seconds += network.elapsed().as_secs_f64();
                 match &out.relit {
                     Some(relit) => {
                         let format =
@@ -929,6 +941,7 @@ impl LsydRelight {
             }
         };
         *lock(&self.engine_counts) = state.relighter.counts();
+        stats.processing_seconds += started.elapsed().as_secs_f64();
         let pts = buffer.pts();
         let duration = buffer.duration();
         drop(stats);
@@ -1022,6 +1035,8 @@ impl LsydRelight {
             .field("skipped-same-light", s.skipped_same_light)
             .field("skipped-static", s.skipped_static)
             .field("qos-reused", s.qos_reused)
+            .field("processing-seconds", s.processing_seconds)
+            .field("network-seconds", s.network_seconds)
             .field("known-source", s.known_source)
             .field("predicted-source", s.predicted_source)
             .field("fallbacks", s.fallbacks)

@@ -1,0 +1,463 @@
+//! The element's side of the run-time against error benchmark.
+//!
+//! ```text
+//! cargo run --release --example benchmark -- [--out results/benchmark] [--quick]
+//! ```
+//!
+//! For each variant (model, precision, threads, temporal filters, skips) a child
+//! process runs the test recordings through the real element and scores them
+//! against their exact ground truth: error in the face region, the change error
+//! (frame-to-frame change against the ground truth's change), throughput, CPU
+//! seconds per frame and peak memory. Selected variants are also timed frame by
+//! frame at 720p and 1080p for p50/p99 latency. Results go to
+//! `<out>/element.json`; `python -m lsyd.benchmark` adds the held-out accuracy,
+//! the PyTorch peer and the hardware limit, and writes the tables and plot.
+
+#[path = "common/mod.rs"]
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use gst::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// One configuration of the element.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+struct Variant {
+    name: String,
+    /// Which comparison it belongs to: model, precision, threads, temporal, skip.
+    group: String,
+    model: PathBuf,
+    threads: u32,
+    /// Further element properties, as gst-launch would set them.
+    properties: Vec<(String, String)>,
+    recordings: Vec<String>,
+    /// Frame sizes to time frame by frame.
+    latency_sizes: Vec<(u32, u32)>,
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct RecordingResult {
+    recording: String,
+    frames: usize,
+    rmse_region: f64,
+    input_rmse_region: f64,
+    change_rmse: f64,
+    adjacent_rmse: f64,
+    fps: f64,
+    stats: serde_json::Value,
+}
+
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct LatencyResult {
+    width: u32,
+    height: u32,
+    frames: usize,
+    p50_ms: f64,
+    p99_ms: f64,
+    fps: f64,
+    /// Share of the element's processing time spent outside the network:
+    /// colour conversion, crop, resampling, transfer, smoothing.
+    outside_network: f64,
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct VariantResult {
+    variant: Variant,
+    recordings: Vec<RecordingResult>,
+    latency: Vec<LatencyResult>,
+    cpu_seconds_per_frame: f64,
+    peak_rss_mb: f64,
+}
+
+/// User plus system CPU seconds of this process.
+fn cpu_seconds() -> f64 {
+    let stat = std::fs::read_to_string("/proc/self/stat").unwrap_or_default();
+    // Fields after the command name, which may contain spaces, are after the last ')'.
+    let rest = stat.rsplit(')').next().unwrap_or("");
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let ticks = |i: usize| f.get(i).and_then(|v| v.parse::<f64>().ok()).unwrap_or(0.0);
+    // utime and stime are fields 14 and 15 of the whole line: 12 and 13 after the name.
+    (ticks(11) + ticks(12)) / 100.0
+}
+
+fn peak_rss_mb() -> f64 {
+    let status = std::fs::read_to_string("/proc/self/status").unwrap_or_default();
+    status
+        .lines()
+        .find(|l| l.starts_with("VmHWM:"))
+        .and_then(|l| l.split_whitespace().nth(1))
+        .and_then(|v| v.parse::<f64>().ok())
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+fn recording_dir(name: &str) -> Result<PathBuf, String> {
+    let data = common::checkout().join("data/recordings").join(name);
+    if data.join("truth-sunset.y4m").exists() {
+        return Ok(data);
+    }
+    let dir = common::checkout().join(format!("target/recordings/{name}-300"));
+    common::ensure_recording(&dir, name, 300)?;
+    Ok(dir)
+}
+
+/// The variant's element properties as strings, with the model and threads.
+fn properties(v: &Variant, threads: &str) -> Vec<(String, String)> {
+    let mut props = vec![
+        (
+            "model-location".to_string(),
+            v.model.to_string_lossy().into_owned(),
+        ),
+        ("threads".to_string(), threads.to_string()),
+    ];
+    props.extend(v.properties.iter().cloned());
+    props
+}
+
+/// Per-frame latency through the element at a frame size: frames enter from an
+/// appsrc as fast as the element takes them; pad probes time each frame in and out.
+fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, String> {
+    common::init();
+    let face = deskstage::dataset::Recording::standard("call").ok_or("no call recording")?;
+    let pipeline = gst::Pipeline::new();
+    let src = gst_app::AppSrc::builder()
+        .caps(
+            &gst_video::VideoCapsBuilder::new()
+                .format(gst_video::VideoFormat::Rgb)
+                .width(480)
+                .height(360)
+                .framerate(gst::Fraction::new(30, 1))
+                .build(),
+        )
+        .format(gst::Format::Time)
+        .build();
+    let scale = gst::parse::bin_from_description(
+        &format!("videoscale ! videoconvert ! video/x-raw,format=I420,width={w},height={h}"),
+        true,
+    )
+    .map_err(|e| e.to_string())?;
+    let mon = gst_app::AppSrc::builder()
+        .caps(
+            &gst_video::VideoCapsBuilder::new()
+                .format(gst_video::VideoFormat::Rgb)
+                .width(256)
+                .height(144)
+                .framerate(gst::Fraction::new(30, 1))
+                .build(),
+        )
+        .format(gst::Format::Time)
+        .build();
+    let r = gst::ElementFactory::make("lsydrelight")
+        .name("r")
+        .build()
+        .map_err(|e| e.to_string())?;
+    for (k, val) in properties(v, &v.threads.to_string()) {
+        r.set_property_from_str(&k, &val);
+    }
+    let sink = gst::ElementFactory::make("fakesink")
+        .property("sync", false)
+        .build()
+        .map_err(|e| e.to_string())?;
+    pipeline
+        .add_many([
+            src.upcast_ref(),
+            scale.upcast_ref(),
+            mon.upcast_ref(),
+            &r,
+            &sink,
+        ])
+        .map_err(|e| e.to_string())?;
+    gst::Element::link_many([src.upcast_ref(), scale.upcast_ref(), &r, &sink])
+        .map_err(|e| e.to_string())?;
+    mon.link_pads(None, &r, Some("monitor_sink"))
+        .map_err(|e| e.to_string())?;
+
+    let entered: Arc<Mutex<Vec<(u64, Instant)>>> = Arc::default();
+    let left: Arc<Mutex<Vec<(u64, Instant)>>> = Arc::default();
+    for (pad, log) in [
+        (r.static_pad("sink").unwrap(), entered.clone()),
+        (r.static_pad("src").unwrap(), left.clone()),
+    ] {
+        pad.add_probe(gst::PadProbeType::BUFFER, move |_, info| {
+            if let Some(b) = info.buffer()
+                && let Some(pts) = b.pts()
+            {
+                log.lock().unwrap().push((pts.nseconds(), Instant::now()));
+            }
+            gst::PadProbeReturn::Ok
+        });
+    }
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| e.to_string())?;
+    let started = Instant::now();
+    let feeder = std::thread::spawn(move || {
+        for i in 0..frames {
+            let f = face.frame(i % 30, false);
+            let pts = gst::ClockTime::from_nseconds(i as u64 * 1_000_000_000 / 30);
+            let d = gst::ClockTime::from_nseconds(1_000_000_000 / 30);
+            for (app, img) in [(&src, &f.face), (&mon, &f.monitor)] {
+                let mut b = gst::Buffer::from_slice(img.data.clone());
+                {
+                    let b = b.get_mut().unwrap();
+                    b.set_pts(pts);
+                    b.set_duration(d);
+                }
+                if app.push_buffer(b).is_err() {
+                    return;
+                }
+            }
+        }
+        let _ = src.end_of_stream();
+        let _ = mon.end_of_stream();
+    });
+    let bus = pipeline.bus().unwrap();
+    let msg = bus.timed_pop_filtered(
+        gst::ClockTime::from_seconds(600),
+        &[gst::MessageType::Eos, gst::MessageType::Error],
+    );
+    let elapsed = started.elapsed();
+    feeder.join().map_err(|_| "feeder panicked")?;
+    let stats = r.property::<gst::Structure>("stats");
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
+    if let Some(m) = msg
+        && let gst::MessageView::Error(e) = m.view()
+    {
+        return Err(e.error().to_string());
+    }
+    let entered = entered.lock().unwrap();
+    let left = left.lock().unwrap();
+    let mut lat: Vec<f64> = left
+        .iter()
+        .filter_map(|(pts, out)| {
+            entered
+                .iter()
+                .find(|(p, _)| p == pts)
+                .map(|(_, inn)| out.duration_since(*inn).as_secs_f64() * 1e3)
+        })
+        .collect();
+    // The first frames load and warm up ONNX Runtime.
+    let warm = lat.len().min(10);
+    lat.drain(..warm);
+    lat.sort_by(|a, b| a.total_cmp(b));
+    let pct = |p: f64| {
+        lat.get(((lat.len() as f64 - 1.0) * p).round() as usize)
+            .copied()
+            .unwrap_or(f64::NAN)
+    };
+    let processing = stats.get::<f64>("processing-seconds").unwrap_or(0.0);
+    let network = stats.get::<f64>("network-seconds").unwrap_or(0.0);
+    Ok(LatencyResult {
+        width: w,
+        height: h,
+        frames: left.len(),
+        p50_ms: pct(0.5),
+        p99_ms: pct(0.99),
+        fps: left.len() as f64 / elapsed.as_secs_f64(),
+        outside_network: if processing > 0.0 {
+            1.0 - network / processing
+        } else {
+            f64::NAN
+        },
+    })
+}
+
+fn run_child(v: Variant) -> Result<VariantResult, String> {
+    let cpu0 = cpu_seconds();
+    let mut frames = 0;
+    let mut recordings = Vec::new();
+    for name in &v.recordings {
+        let dir = recording_dir(name)?;
+        let t = Instant::now();
+        let props = properties(&v, &v.threads.to_string());
+        let refs: Vec<(&str, &str)> = props
+            .iter()
+            .map(|(k, v)| (k.as_str(), v.as_str()))
+            .collect();
+        let s = common::score_recording(&dir, "sunset", true, &refs)?;
+        frames += s.frames;
+        recordings.push(RecordingResult {
+            recording: name.clone(),
+            frames: s.frames,
+            rmse_region: s.rmse_region,
+            input_rmse_region: s.input_rmse_region,
+            change_rmse: s.change_rmse,
+            adjacent_rmse: s.adjacent_rmse,
+            fps: s.frames as f64 / t.elapsed().as_secs_f64(),
+            stats: s.stats,
+        });
+    }
+    let cpu = (cpu_seconds() - cpu0) / frames.max(1) as f64;
+    let latency = v
+        .latency_sizes
+        .iter()
+        .map(|&(w, h)| latency(&v, w, h, 150))
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(VariantResult {
+        cpu_seconds_per_frame: cpu,
+        peak_rss_mb: peak_rss_mb(),
+        recordings,
+        latency,
+        variant: v,
+    })
+}
+
+fn variants(root: &Path, quick: bool) -> Vec<Variant> {
+    let bench = root.join("target/bench-models");
+    let default = root.join("models/default");
+    let all = |quick_list: &[&str]| -> Vec<String> {
+        if quick {
+            quick_list.iter().map(|s| s.to_string()).collect()
+        } else {
+            ["steady", "slow", "cuts", "walkaway"]
+                .iter()
+                .map(|s| s.to_string())
+                .collect()
+        }
+    };
+    let base = |name: &str, group: &str, model: &Path| Variant {
+        name: name.into(),
+        group: group.into(),
+        model: model.to_path_buf(),
+        threads: 2,
+        properties: vec![],
+        recordings: all(&["cuts"]),
+        latency_sizes: vec![],
+    };
+    let with = |mut v: Variant, props: &[(&str, &str)]| {
+        v.properties = props
+            .iter()
+            .map(|(k, val)| (k.to_string(), val.to_string()))
+            .collect();
+        v
+    };
+    let mut v = vec![Variant {
+        latency_sizes: vec![(1280, 720), (1920, 1080)],
+        ..base("default", "model", &default)
+    }];
+    // Model size and resolution: every exported variant with the default element settings.
+    for run in ["t-lcfn", "p-r96", "p-r160", "p-w0125", "p-w05"] {
+        let m = bench.join(run);
+        if m.join("model.json").exists() {
+            v.push(with(base(run, "model", &m), &[("skip-static", "false")]));
+        }
+    }
+    v.push(with(
+        base("default, no skips", "model", &default),
+        &[("skip-static", "false")],
+    ));
+    // Precision.
+    for p in ["fp16", "int8"] {
+        let m = bench.join(format!("default-{p}"));
+        if m.join("model.json").exists() {
+            v.push(Variant {
+                latency_sizes: vec![(1280, 720)],
+                ..with(
+                    base(&format!("default {p}"), "precision", &m),
+                    &[("skip-static", "false")],
+                )
+            });
+        }
+    }
+    // Threads.
+    v.push(Variant {
+        threads: 1,
+        latency_sizes: vec![(1280, 720)],
+        ..with(
+            base("default, 1 thread", "threads", &default),
+            &[("skip-static", "false")],
+        )
+    });
+    // The paper's temporal filters.
+    for (name, alpha, frames) in [
+        ("no smoothing, no averaging", "1.0", "1"),
+        ("averaging only", "1.0", "3"),
+        ("smoothing only", "0.7", "1"),
+    ] {
+        v.push(with(
+            base(name, "temporal", &default),
+            &[
+                ("alpha", alpha),
+                ("average-frames", frames),
+                ("skip-static", "false"),
+            ],
+        ));
+    }
+    // Each skip, off, on every recording.
+    let rec = all(&["steady", "walkaway"]);
+    for (name, prop) in [
+        ("no static skip", "skip-static"),
+        ("no same-light skip", "skip-same-light"),
+        ("no absent skip", "skip-absent"),
+    ] {
+        v.push(Variant {
+            recordings: rec.clone(),
+            ..with(base(name, "skip", &default), &[(prop, "false")])
+        });
+    }
+    v.push(Variant {
+        recordings: rec.clone(),
+        ..base("all skips (default)", "skip", &default)
+    });
+    if quick {
+        v.truncate(3);
+    }
+    v
+}
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    if args.first().map(String::as_str) == Some("--child") {
+        let v: Variant = serde_json::from_str(&args[1]).map_err(|e| e.to_string())?;
+        let r = run_child(v)?;
+        println!("{}", serde_json::to_string(&r).unwrap());
+        return Ok(());
+    }
+    let flag = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let out = flag("--out")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| common::checkout().join("results/benchmark"));
+    let quick = args.iter().any(|a| a == "--quick");
+    std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let mut results = Vec::new();
+    for v in variants(&common::checkout(), quick) {
+        eprintln!("benchmark: {} ({})", v.name, v.group);
+        // A process per variant: its own peak memory and a cold start.
+        let output = Command::new(&exe)
+            .arg("--child")
+            .arg(serde_json::to_string(&v).unwrap())
+            .output()
+            .map_err(|e| e.to_string())?;
+        let stdout = String::from_utf8_lossy(&output.stdout);
+        match stdout
+            .lines()
+            .last()
+            .map(serde_json::from_str::<serde_json::Value>)
+        {
+            Some(Ok(r)) if output.status.success() => results.push(r),
+            _ => {
+                return Err(format!(
+                    "variant {} failed: {}",
+                    v.name,
+                    String::from_utf8_lossy(&output.stderr)
+                ));
+            }
+        }
+    }
+    let path = out.join("element.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&results).unwrap())
+        .map_err(|e| e.to_string())?;
+    eprintln!("wrote {}", path.display());
+    Ok(())
+}

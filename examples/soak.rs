@@ -1,0 +1,146 @@
+//! A long soak of the stateful engine: many frames of changing faces and lights,
+//! checking every output for NaN/Inf and range, memory every block, and drift:
+//! the same constant probe sequence, run every block, must settle to the same
+//! output every time.
+//!
+//! ```text
+//! cargo run --release --example soak -- [--frames 100000] [--model models/default] [--threads 2]
+//! ```
+
+#[path = "common/mod.rs"]
+mod common;
+
+use std::time::Instant;
+
+use deskstage::content::{Clip, Playlist};
+use deskstage::dataset::Recording;
+use gstlsydrelight::engine::{self, Provider, Relighter, Source, Temporal};
+use gstlsydrelight::frame::{Crop, Frame, PixelFormat, Plane, YuvMatrix, sample_crop};
+use gstlsydrelight::light::Light;
+use gstlsydrelight::paths;
+
+fn view(img: &deskstage::monitor::RgbImage) -> Frame<'_> {
+    let p = Plane {
+        data: &img.data,
+        stride: img.width * 3,
+    };
+    Frame {
+        format: PixelFormat::Rgb,
+        width: img.width,
+        height: img.height,
+        planes: [p, p, p],
+        matrix: YuvMatrix::BT601_LIMITED,
+    }
+}
+
+fn rss_mb() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmRSS:"))
+                .map(str::to_string)
+        })
+        .and_then(|l| {
+            l.split_whitespace()
+                .nth(1)
+                .and_then(|v| v.parse::<f64>().ok())
+        })
+        .map_or(0.0, |kb| kb / 1024.0)
+}
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let flag = |name: &str| {
+        args.iter()
+            .position(|a| a == name)
+            .and_then(|i| args.get(i + 1))
+            .cloned()
+    };
+    let frames: usize =
+        flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
+    let threads: usize =
+        flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
+    let model = flag("--model")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(common::default_model);
+
+    let env = engine::environment(&paths::default_ort_library()).map_err(|e| e.to_string())?;
+    let mut r = Relighter::new(env, &model, threads, Provider::Cpu, Temporal::default())
+        .map_err(|e| e.to_string())?;
+    r.set_target(&Light::uniform([0.9, 0.75, 0.6]))
+        .map_err(|e| e.to_string())?;
+    let res = r.resolution();
+
+    // 60 distinct frames of a recorded call and their monitor lights, cycled.
+    let rec = Recording::standard("cuts").ok_or("no cuts recording")?;
+    let inputs: Vec<(Vec<f32>, Light)> = (0..60)
+        .map(|i| {
+            let f = rec.frame(i * 5, false);
+            let crop = Crop::centred(f.face.width, f.face.height, 0.5, 0.5, 1.0);
+            (
+                sample_crop(&view(&f.face), crop, res),
+                Light::from_frame(&view(&f.monitor)),
+            )
+        })
+        .collect();
+    let probe_light = Light::from_frame(&view(
+        &Playlist::still(Clip::Solid(deskstage::math::Vec3::new(0.7, 0.7, 0.7))).frame(0.0),
+    ));
+    let probe = |r: &mut Relighter| -> Result<Vec<f32>, String> {
+        let mut out = Vec::new();
+        for _ in 0..60 {
+            out = r
+                .process(&inputs[0].0, Source::Known(probe_light.clone()), false)
+                .map_err(|e| e.to_string())?
+                .relit
+                .ok_or("NaN in the probe")?;
+        }
+        Ok(out)
+    };
+
+    let reference = probe(&mut r)?;
+    let block = 10_000.min(frames);
+    println!("| frames | seconds | ms/frame | RSS MiB | max drift | NaN/Inf | out of range |");
+    println!("|---|---|---|---|---|---|---|");
+    let started = Instant::now();
+    let (mut done, mut bad, mut out_of_range) = (0usize, 0usize, 0usize);
+    while done < frames {
+        let t = Instant::now();
+        for i in done..(done + block).min(frames) {
+            let (img, light) = &inputs[(i * 7) % inputs.len()];
+            // Every tenth frame of a stretch has no known source light.
+            let source = if i % 10 == 3 {
+                Source::Unknown
+            } else {
+                Source::Known(light.clone())
+            };
+            let out = r
+                .process(img, source, i % 25 == 0)
+                .map_err(|e| e.to_string())?;
+            match out.relit {
+                Some(v) => out_of_range += v.iter().filter(|x| !(0.0..=1.0).contains(*x)).count(),
+                None => bad += 1,
+            }
+        }
+        let n = (done + block).min(frames) - done;
+        done += n;
+        let drift = probe(&mut r)?
+            .iter()
+            .zip(&reference)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0f32, f32::max);
+        println!(
+            "| {done} | {:.0} | {:.2} | {:.1} | {drift:.2e} | {bad} | {out_of_range} |",
+            started.elapsed().as_secs_f64(),
+            1e3 * t.elapsed().as_secs_f64() / n as f64,
+            rss_mb()
+        );
+    }
+    if bad > 0 || out_of_range > 0 {
+        return Err(format!(
+            "{bad} frames had NaN/Inf and {out_of_range} values were out of range"
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,350 @@
+"""The model side of the run-time against error benchmark, and its report.
+
+    python -m lsyd.benchmark export --data data --runs runs      # variants into target/bench-models
+    python -m lsyd.benchmark report --data data --out results/benchmark
+
+``export`` exports every trained variant (width, resolution) and makes fp16 and
+int8 versions of the default model. ``report`` (after the element's side,
+``cargo run --release --example benchmark``) measures on the held-out set with
+ONNX Runtime: RMSE, MS-SSIM and FLIP against exact ground truth, the network's
+time per frame at 1 and 2 threads, the same network in PyTorch eager (the peer),
+and FLOPs against this machine's sustained GFLOP/s for such convolutions (the
+limit). It writes ``table.md``, ``skips.md``, ``results.json`` and ``pareto.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import onnxruntime as ort
+import torch
+from onnx import TensorProto, helper
+
+from . import contract, data, export, metrics, model, variants
+from .train import load_network
+
+ROOT = Path(__file__).resolve().parents[2]
+BENCH = ROOT / "target" / "bench-models"
+VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125", "p-w05")
+
+
+def export_all(data_root: Path, runs: Path) -> None:
+    default = ROOT / "models" / "default"
+    presence = json.loads((default / "model.json").read_text())["stages"].get("presence")
+    for run in VARIANT_RUNS:
+        if not (runs / run / "checkpoint.pt").exists():
+            print(f"skipping {run}: not trained")
+            continue
+        out = BENCH / run
+        result = export.export(runs / run, data_root, out)
+        cfg = result["config"]
+        m = contract.manifest(run, cfg.net.resolution, cfg.net.widths, "fp32", {"run": run}, {})
+        if presence:
+            # The same presence classifier as the default model, so skips compare alike.
+            shutil.copy(default / "presence.onnx", out / "presence.onnx")
+            m["stages"]["presence"] = presence
+        contract.write(out / "model.json", m)
+    res = contract.read(default / "model.json")["resolution"]
+    images, lights = variants.calibration_frames(data_root, res)
+    variants.to_fp16(default, BENCH / "default-fp16")
+    variants.to_int8(default, BENCH / "default-int8", variants.chain_inputs(default, images, lights))
+
+
+class OrtModel:
+    """A contract model run stage by stage in ONNX Runtime, as the engine does."""
+
+    def __init__(self, folder: Path, threads: int):
+        self.m = contract.read(folder / "model.json")
+        opts = ort.SessionOptions()
+        opts.intra_op_num_threads = threads
+        opts.inter_op_num_threads = 1
+        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
+        self.s = {
+            k: ort.InferenceSession(str(folder / self.m["stages"][k]["file"]), opts, providers=["CPUExecutionProvider"])
+            for k in variants.STAGES
+        }
+        self.enc_names = [o.name for o in self.s["encoder"].get_outputs()]
+
+    def relight(self, image: np.ndarray, source: np.ndarray, target_code: np.ndarray) -> np.ndarray:
+        enc = dict(zip(self.enc_names, self.s["encoder"].run(None, {"image": image})))
+        (code,) = self.s["light_encoder"].run(None, {"light": source})
+        delit = self.s["delight"].run(None, {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": code})
+        feed = {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": target_code}
+        return self.s["decoder"].run(None, feed)[0]
+
+    def code(self, light: np.ndarray) -> np.ndarray:
+        return self.s["light_encoder"].run(None, {"light": light})[0]
+
+
+def heldout_accuracy(folder: Path, held: data.Heldout) -> dict[str, float]:
+    net = OrtModel(folder, 2)
+    res = net.m["resolution"]
+    small = data.area_resize(held.images, res) / 255.0
+    scores: dict[str, list[float]] = {"rmse": [], "ms_ssim": [], "flip": []}
+    codes = [net.code(held.lights[j][None]) for j in range(held.lights.shape[0])]
+    for p in range(held.images.shape[0]):
+        for i in range(held.images.shape[1]):
+            x = np.ascontiguousarray(small[p, i].transpose(2, 0, 1)[None], dtype=np.float32)
+            for j in range(held.images.shape[1]):
+                if j == i:
+                    continue
+                out = net.relight(x, held.lights[i][None], codes[j])[0]
+                full = metrics.transfer(held.images[p, i], x[0], out)
+                gt = held.clean[p, j]
+                scores["rmse"].append(metrics.rmse(full, gt))
+                scores["ms_ssim"].append(metrics.ms_ssim(full, gt))
+                scores["flip"].append(metrics.flip(full, gt))
+    return {k: float(np.mean(v)) for k, v in scores.items()}
+
+
+def time_ort(folder: Path, threads: int, frames: int = 60) -> float:
+    """Milliseconds per frame of the network alone in ONNX Runtime (known source light)."""
+    net = OrtModel(folder, threads)
+    r = net.m["resolution"]
+    x = np.random.default_rng(0).random((1, 3, r, r), dtype=np.float32)
+    light = np.full((1, 3, 16, 32), 0.5, dtype=np.float32)
+    tcode = net.code(light)
+    for _ in range(5):
+        net.relight(x, light, tcode)
+    t = time.perf_counter()
+    for _ in range(frames):
+        net.relight(x, light, tcode)
+    return 1e3 * (time.perf_counter() - t) / frames
+
+
+def time_torch(run: Path, threads: int, frames: int = 60) -> float:
+    """The same network, same stages and threads, in PyTorch eager: the peer."""
+    torch.set_num_threads(threads)
+    net, cfg = load_network(run)
+    r = cfg.net.resolution
+    x = torch.rand(1, 3, r, r)
+    light = torch.full((1, 3, 16, 32), 0.5)
+    with torch.inference_mode():
+        tcode = net.light_encoder(light)
+
+        def frame():
+            stem, feats = net.encode(x)
+            f = net.delit(feats, net.light_encoder(light))
+            return net.decode(stem, f, tcode)
+
+        for _ in range(5):
+            frame()
+        t = time.perf_counter()
+        for _ in range(frames):
+            frame()
+    return 1e3 * (time.perf_counter() - t) / frames
+
+
+def sustained_gflops(threads: int) -> float:
+    """GFLOP/s of ONNX Runtime on a stack of 3x3 convolutions like the network's (32 channels, 64x64)."""
+    c, hw, depth = 32, 64, 8
+    rng = np.random.default_rng(0)
+    nodes, inits = [], []
+    prev = "x"
+    for k in range(depth):
+        w = helper.make_tensor(
+            f"w{k}",
+            TensorProto.FLOAT,
+            [c, c, 3, 3],
+            rng.standard_normal((c, c, 3, 3)).astype(np.float32).ravel() * 0.05,
+        )
+        inits.append(w)
+        nodes.append(helper.make_node("Conv", [prev, f"w{k}"], [f"y{k}"], pads=[1, 1, 1, 1]))
+        prev = f"y{k}"
+    graph = helper.make_graph(
+        nodes,
+        "convs",
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, c, hw, hw])],
+        [helper.make_tensor_value_info(prev, TensorProto.FLOAT, [1, c, hw, hw])],
+        inits,
+    )
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads
+    s = ort.InferenceSession(m.SerializeToString(), opts, providers=["CPUExecutionProvider"])
+    x = rng.random((1, c, hw, hw), dtype=np.float32)
+    for _ in range(10):
+        s.run(None, {"x": x})
+    n = 200
+    t = time.perf_counter()
+    for _ in range(n):
+        s.run(None, {"x": x})
+    flops = 2 * c * c * 9 * hw * hw * depth * n
+    return flops / (time.perf_counter() - t) / 1e9
+
+
+def model_flops(folder: Path) -> float:
+    m = contract.read(folder / "model.json")
+    w = m["widths"]
+    width = w[1] / model.PAPER_WIDTHS[1]
+    net = model.build(model.NetConfig(resolution=m["resolution"], width=width))
+    return model.conv_flops(net, m["resolution"]) / 1e9
+
+
+def report(data_root: Path, out: Path, runs: Path) -> None:
+    element = json.loads((out / "element.json").read_text())
+    held = data.Heldout.load(data_root / "heldout")
+    limit2 = sustained_gflops(2)
+    limit1 = sustained_gflops(1)
+    rows = []
+    accuracy_cache: dict[str, dict] = {}
+    for r in element:
+        v = r["variant"]
+        folder = Path(v["model"])
+        key = str(folder)
+        if key not in accuracy_cache:
+            print(f"held-out accuracy: {folder.name}", flush=True)
+            accuracy_cache[key] = heldout_accuracy(folder, held)
+        recs = r["recordings"]
+        frames = sum(x["frames"] for x in recs)
+        rows.append(
+            {
+                "name": v["name"],
+                "group": v["group"],
+                "model": folder.name,
+                "threads": v["threads"],
+                "properties": v["properties"],
+                "gflop": model_flops(folder),
+                **{f"heldout_{k}": val for k, val in accuracy_cache[key].items()},
+                "recording_rmse": float(
+                    np.average([x["rmse_region"] for x in recs], weights=[x["frames"] for x in recs])
+                ),
+                "change_rmse": float(np.average([x["change_rmse"] for x in recs], weights=[x["frames"] for x in recs])),
+                "fps": frames / sum(x["frames"] / x["fps"] for x in recs),
+                "cpu_s_per_frame": r["cpu_seconds_per_frame"],
+                "peak_rss_mb": r["peak_rss_mb"],
+                "latency": r["latency"],
+                "recordings": recs,
+            }
+        )
+    default = ROOT / "models" / "default"
+    net_ms = {t: time_ort(default, t) for t in (1, 2)}
+    peer_ms = {t: time_torch(runs / "default", t) for t in (1, 2)}
+    gflop = model_flops(default)
+    summary = {
+        "sustained_gflops": {"1": limit1, "2": limit2},
+        "network_ms_ort": net_ms,
+        "network_ms_torch": peer_ms,
+        "peer_ratio": {t: peer_ms[t] / net_ms[t] for t in net_ms},
+        "default_gflop": gflop,
+        "limit_fps_2_threads": limit2 / gflop,
+        "cuda": (
+            "not measured: no GPU was lent to this task; execution-provider=cuda is an error with the pinned CPU wheel"
+        ),
+    }
+    (out / "results.json").write_text(json.dumps({"rows": rows, "summary": summary}, indent=2) + "\n")
+    (out / "table.md").write_text(table(rows, summary))
+    (out / "skips.md").write_text(skip_table(rows))
+    pareto(rows, out / "pareto.png")
+    print(table(rows, summary))
+    print(skip_table(rows))
+
+
+TABLE_HEADER = (
+    "| variant | comparison | GFLOP | held-out RMSE | MS-SSIM | FLIP | recordings RMSE | change RMSE | fps "
+    "| CPU s/frame | peak MB | p50/p99 ms 720p | p50/p99 ms 1080p |"
+)
+
+
+def latency_cell(latency: list[dict], size: str) -> str:
+    x = next((x for x in latency if f"{x['width']}x{x['height']}" == size), None)
+    return f"{x['p50_ms']:.1f} / {x['p99_ms']:.1f}" if x else ""
+
+
+def table(rows: list[dict], summary: dict) -> str:
+    out = [TABLE_HEADER, "|---" * 13 + "|"]
+    for r in rows:
+        out.append(
+            f"| {r['name']} | {r['group']} | {r['gflop']:.2f} | {r['heldout_rmse']:.2f} | {r['heldout_ms_ssim']:.4f} | "
+            f"{r['heldout_flip']:.4f} | {r['recording_rmse']:.2f} | {r['change_rmse']:.2f} | {r['fps']:.1f} | "
+            f"{r['cpu_s_per_frame']:.3f} | {r['peak_rss_mb']:.0f} | {latency_cell(r['latency'], '1280x720')} | "
+            f"{latency_cell(r['latency'], '1920x1080')} |"
+        )
+    s = summary
+    ort_ms, torch_ms, ratio = s["network_ms_ort"], s["network_ms_torch"], s["peer_ratio"]
+    out += [
+        "",
+        f"- Network alone, ONNX Runtime: {ort_ms[1]:.1f} ms (1 thread), {ort_ms[2]:.1f} ms (2 threads) a frame.",
+        f"- Peer, PyTorch eager, same network and threads: {torch_ms[1]:.1f} ms and {torch_ms[2]:.1f} ms: "
+        f"our engine is {ratio[1]:.2f}x and {ratio[2]:.2f}x faster.",
+        f"- Limit: {s['default_gflop']:.2f} GFLOP a frame at this machine's sustained "
+        f"{s['sustained_gflops']['2']:.0f} GFLOP/s (ONNX Runtime, 2 threads, 3x3 convolutions of 32 channels) "
+        f"is {s['limit_fps_2_threads']:.0f} fps.",
+        f"- CUDA: {s['cuda']}.",
+    ]
+    for r in rows:
+        for x in r["latency"]:
+            out.append(
+                f"- {r['name']}, {x['width']}x{x['height']} I420: {x['fps']:.1f} fps through the element; "
+                f"{100 * x['outside_network']:.0f}% of its time is outside the network "
+                "(conversion, crop, resampling, transfer, smoothing)."
+            )
+    return "\n".join(out) + "\n"
+
+
+def skip_table(rows: list[dict]) -> str:
+    out = [
+        "| setting | recording | fps | RMSE face region | change RMSE | frames skipped |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        if r["group"] != "skip":
+            continue
+        for x in r["recordings"]:
+            st = x["stats"]
+            skipped = sum(st.get(k, 0) for k in ("skipped-static", "skipped-same-light", "skipped-absent"))
+            out.append(
+                f"| {r['name']} | {x['recording']} | {x['fps']:.1f} | {x['rmse_region']:.2f} | "
+                f"{x['change_rmse']:.2f} | {skipped}/{st.get('frames', 0)} |"
+            )
+    return "\n".join(out) + "\n"
+
+
+def pareto(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    pts = [r for r in rows if r["group"] in ("model", "precision", "threads")]
+    fig, ax = plt.subplots(figsize=(8, 5.5))
+    front = []
+    for r in sorted(pts, key=lambda r: -r["fps"]):
+        if not front or r["heldout_rmse"] < front[-1]["heldout_rmse"]:
+            front.append(r)
+    for r in pts:
+        on = r in front
+        ax.scatter(r["fps"], r["heldout_rmse"], s=70 if on else 40, c="#2a6" if on else "#999", zorder=3)
+        ax.annotate(r["name"], (r["fps"], r["heldout_rmse"]), textcoords="offset points", xytext=(5, 4), fontsize=8)
+    ax.plot(
+        [r["fps"] for r in front], [r["heldout_rmse"] for r in front], c="#2a6", lw=1, zorder=2, label="Pareto front"
+    )
+    ax.axvline(30, c="#c44", ls="--", lw=1, label="30 fps (real time)")
+    ax.set_xlabel("frames per second through the element (480x360 recordings, 2-core CPU)")
+    ax.set_ylabel("held-out RMSE (0-255), lower is better")
+    ax.set_title("Run time against error")
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("stage", choices=["export", "report"])
+    p.add_argument("--data", type=Path, default=ROOT / "data")
+    p.add_argument("--runs", type=Path, default=ROOT / "runs")
+    p.add_argument("--out", type=Path, default=ROOT / "results" / "benchmark")
+    a = p.parse_args()
+    if a.stage == "export":
+        export_all(a.data, a.runs)
+    else:
+        report(a.data, a.out, a.runs)
+
+
+if __name__ == "__main__":
+    main()

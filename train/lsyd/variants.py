@@ -1,0 +1,126 @@
+"""Lower-precision variants of an exported model: fp16 weights and int8 quantisation.
+
+    python -m lsyd.variants --model models/default --data data --out target/bench-models
+
+Both keep the contract's float32 inputs and outputs, so the element runs them
+unchanged. fp16 stores weights and computes in half precision where ONNX
+Runtime supports it; int8 is static QDQ quantisation (per-channel weights,
+activations calibrated on training frames, never on the held-out set).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import onnx
+import onnxruntime as ort
+from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
+from onnxruntime.transformers.float16 import convert_float_to_float16
+
+from . import contract, data
+
+STAGES = ("light_encoder", "encoder", "light_decoder", "delight", "decoder")
+
+
+def _session(path: Path) -> ort.InferenceSession:
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = 2
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+
+
+def chain_inputs(model: Path, images: np.ndarray, lights: np.ndarray) -> dict[str, list[dict]]:
+    """Every stage's inputs for each (image, light) pair, from the fp32 model: calibration data."""
+    m = contract.read(model / "model.json")
+    s = {k: _session(model / m["stages"][k]["file"]) for k in STAGES}
+    enc_names = [o.name for o in s["encoder"].get_outputs()]
+    feeds: dict[str, list[dict]] = {k: [] for k in STAGES}
+    target = lights[::-1]
+    for img, light, tgt in zip(images, lights, target):
+        enc = dict(zip(enc_names, s["encoder"].run(None, {"image": img[None]})))
+        feeds["encoder"].append({"image": img[None]})
+        feeds["light_encoder"].append({"light": light[None]})
+        feeds["light_decoder"].append({k: enc[k] for k in ("e2", "e4", "e6")})
+        (code,) = s["light_encoder"].run(None, {"light": light[None]})
+        (tcode,) = s["light_encoder"].run(None, {"light": tgt[None]})
+        din = {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": code}
+        feeds["delight"].append(din)
+        delit = s["delight"].run(None, din)
+        feeds["decoder"].append(
+            {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": tcode}
+        )
+    return feeds
+
+
+class _Reader(CalibrationDataReader):
+    def __init__(self, feeds: list[dict]):
+        self.it = iter(feeds)
+
+    def get_next(self):
+        return next(self.it, None)
+
+
+def _copy_manifest(model: Path, out: Path, precision: str) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    m = json.loads((model / "model.json").read_text())
+    m["precision"] = precision
+    m["name"] = f"{m['name']}-{precision}"
+    m["metrics"] = {}
+    m.pop("parity", None)
+    if "presence" in m["stages"]:
+        shutil.copy(model / "presence.onnx", out / "presence.onnx")
+    contract.write(out / "model.json", m)
+
+
+def to_fp16(model: Path, out: Path) -> None:
+    _copy_manifest(model, out, "fp16")
+    for stage in STAGES:
+        m = onnx.load(str(model / f"{stage}.onnx"))
+        onnx.save(convert_float_to_float16(m, keep_io_types=True), str(out / f"{stage}.onnx"))
+
+
+def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]]) -> None:
+    _copy_manifest(model, out, "int8")
+    for stage in STAGES:
+        quantize_static(
+            str(model / f"{stage}.onnx"),
+            str(out / f"{stage}.onnx"),
+            _Reader(calibration[stage]),
+            quant_format=QuantFormat.QDQ,
+            per_channel=True,
+            activation_type=QuantType.QUInt8,
+            weight_type=QuantType.QInt8,
+        )
+
+
+def calibration_frames(data_root: Path, resolution: int, count: int = 48) -> tuple[np.ndarray, np.ndarray]:
+    """Training frames and their lights, spread over the capture sessions."""
+    images, lights = [], []
+    dirs = data.capture_dirs(data_root / "captures")
+    per = max(1, count // len(dirs))
+    for d in dirs:
+        cap = data.Capture.load(d)
+        idx = np.linspace(0, len(cap.face) - 1, per).astype(int)
+        images.append(data.to_tensor(data.area_resize(cap.face[idx], resolution)).numpy())
+        lights.append(contract.light_from_frames(np.asarray(cap.monitor[idx])))
+    return np.concatenate(images)[:count], np.concatenate(lights)[:count]
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--model", type=Path, required=True)
+    p.add_argument("--data", type=Path, default=Path("data"))
+    p.add_argument("--out", type=Path, required=True, help="writes <out>/<model>-fp16 and <out>/<model>-int8")
+    a = p.parse_args()
+    res = contract.read(a.model / "model.json")["resolution"]
+    images, lights = calibration_frames(a.data, res)
+    to_fp16(a.model, a.out / f"{a.model.name}-fp16")
+    to_int8(a.model, a.out / f"{a.model.name}-int8", chain_inputs(a.model, images, lights))
+    print(f"wrote {a.out / (a.model.name + '-fp16')} and {a.out / (a.model.name + '-int8')}")
+
+
+if __name__ == "__main__":
+    main()
