@@ -8,6 +8,7 @@
 //! deskstage recording --out DIR --name steady|slow|cuts|walkaway|call [--frames N] [--width W --height H]
 //! deskstage sheet     --out FILE.png [--subject N]
 //! deskstage targets   --out DIR      (the target monitor lights as PNG: studio, sunset, left-key)
+//! deskstage speed                    (prints the renderer's timings)
 //! deskstage all       --out DIR      (everything the trainer and benchmarks read)
 //! ```
 
@@ -86,6 +87,66 @@ fn recording(out: &Path, spec: RecordingSpec) -> Result<(), String> {
     Ok(())
 }
 
+/// Times the renderer: the per-pose precompute, one light, each further light
+/// in a batch, and whole recordings.
+fn speed() -> Result<(), String> {
+    use deskstage::content::{Playlist, Style};
+    use deskstage::material::Look;
+    use deskstage::monitor::CellLight;
+    use deskstage::render::{Renderer, Scene};
+    use deskstage::subject::{State, Subject};
+    let ms = |t: Instant| 1e3 * t.elapsed().as_secs_f64();
+    println!(
+        "| frame | per-pose precompute ms | one light ms | each further light ms (batch of 8) |"
+    );
+    println!("|---|---|---|---|");
+    let playlist = Playlist::random(1, "speed", 10.0, Style::Capture);
+    let lights: Vec<CellLight> = (0..8)
+        .map(|i| CellLight::from_frame(&playlist.frame(i as f64), 16, 32))
+        .collect();
+    let refs: Vec<&CellLight> = lights.iter().collect();
+    for (w, h) in [(256, 256), (480, 360), (640, 480)] {
+        let r = Renderer::new(Scene::new(Subject::default(), w, h))?;
+        let (mut pre, mut one, mut eight) = (f64::MAX, f64::MAX, f64::MAX);
+        for i in 0..5 {
+            let mut st = State::default();
+            st.pose.yaw = 0.05 * i as f32;
+            let t = Instant::now();
+            let tr = r.prepare(&Look::default(), &st);
+            pre = pre.min(ms(t));
+            let t = Instant::now();
+            r.render(&tr, &refs[..1]);
+            one = one.min(ms(t));
+            let t = Instant::now();
+            r.render(&tr, &refs);
+            eight = eight.min(ms(t));
+        }
+        println!(
+            "| {w}x{h} | {pre:.1} | {one:.1} | {:.1} |",
+            (eight - one) / 7.0
+        );
+    }
+    println!();
+    println!(
+        "| recording (300 frames, 480x360) | seconds, face only | seconds, with 3 ground-truth targets |"
+    );
+    println!("|---|---|---|");
+    for name in ["steady", "cuts"] {
+        let rec = Recording::standard(name).ok_or("no such recording")?;
+        let t = Instant::now();
+        for i in 0..rec.spec.frames {
+            rec.frame(i, false);
+        }
+        let face = t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        for i in 0..rec.spec.frames {
+            rec.frame(i, true);
+        }
+        println!("| {name} | {face:.1} | {:.1} |", t.elapsed().as_secs_f64());
+    }
+    Ok(())
+}
+
 fn run(a: &Args) -> Result<(), String> {
     let subject = a.num("subject", DEFAULT_SUBJECT_SEED)?;
     let spec = CaptureSpec {
@@ -146,6 +207,7 @@ fn run(a: &Args) -> Result<(), String> {
             let sheet = dataset::contact_sheet(subject, 192)?;
             deskstage::io::write_png(&out.join("contact-sheet.png"), &sheet).map_err(io)
         }
+        "speed" => speed(),
         other => Err(format!("unknown command {other}")),
     }
 }
