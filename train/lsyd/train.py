@@ -192,8 +192,15 @@ def load_network(run: Path, device: str = "cpu") -> tuple[torch.nn.Module, Train
 
 
 def train(
-    cfg: TrainConfig, data_root: Path, run: Path, resume: bool, checkpoint_every: int, device: torch.device
+    cfg: TrainConfig,
+    data_root: Path,
+    run: Path,
+    resume: bool,
+    checkpoint_every: int,
+    device: torch.device,
+    stop_at: int | None = None,
 ) -> None:
+    """Trains to ``cfg.steps``, or pauses after step ``stop_at`` with a checkpoint to resume from."""
     run.mkdir(parents=True, exist_ok=True)
     config_path = run / "config.json"
     if resume and config_path.exists():
@@ -230,7 +237,8 @@ def train(
             log.writeheader()
         bar = tqdm(total=cfg.steps, initial=trainer.step, desc=run.name, unit="step")
         start = time.time()
-        while trainer.step < cfg.steps:
+        end = min(cfg.steps, stop_at) if stop_at else cfg.steps
+        while trainer.step < end:
             idx = torch.randint(len(pairs.pairs), (cfg.batch,), generator=trainer.sampler)
             terms = trainer.train_step(pairs.batch(idx))
             bar.update(1)
@@ -238,10 +246,10 @@ def train(
                 bar.set_postfix(l1=f"{terms['l1']:.4f}", g=f"{terms['g']:.3f}")
                 log.writerow({"step": trainer.step, "seconds": round(time.time() - start, 1), **terms})
                 f.flush()
-            if trainer.step % checkpoint_every == 0 or trainer.step == cfg.steps:
+            if trainer.step % checkpoint_every == 0 or trainer.step == end:
                 trainer.save()
         bar.close()
-    print(f"trained {cfg.steps} steps; checkpoint {ckpt}")
+    print(f"trained {trainer.step} of {cfg.steps} steps; checkpoint {ckpt}")
 
 
 def main() -> None:
@@ -263,6 +271,7 @@ def main() -> None:
     p.add_argument("--device", default="auto", help="auto, cpu or cuda")
     p.add_argument("--checkpoint-every", type=int, default=500)
     p.add_argument("--resume", action="store_true")
+    p.add_argument("--stop-at", type=int, default=None, help="pause after this step; --resume continues")
     a = p.parse_args()
 
     if a.threads:
@@ -287,7 +296,7 @@ def main() -> None:
         pairing=pairing.PairingRule(max_keypoint_distance=a.max_keypoint_distance),
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
-    train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device)
+    train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)
 
 
 if __name__ == "__main__":

@@ -35,24 +35,13 @@ def test_two_videos_become_a_capture(tmp_path):
     rec = tmp_path / "call"
     videos = {}
     for name in ("face", "monitor"):
-        videos[name] = tmp_path / f"{name}.mkv"
-        subprocess.run(
-            [
-                "gst-launch-1.0",
-                "-q",
-                "filesrc",
-                f"location={rec / (name + '.y4m')}",
-                "!",
-                "y4mdec",
-                "!",
-                "matroskamux",
-                "!",
-                "filesink",
-                f"location={videos[name]}",
-            ],
-            check=True,
-            cwd=ROOT,
+        # As a webcam recorder and a screen recorder would write them: H.264 in MP4.
+        videos[name] = tmp_path / f"{name}.mp4"
+        pipeline = (
+            f"filesrc location={rec / (name + '.y4m')} ! y4mdec ! videoconvert ! video/x-raw,format=I420 "
+            f"! x264enc speed-preset=ultrafast ! mp4mux ! filesink location={videos[name]}"
         )
+        subprocess.run(["gst-launch-1.0", "-q", *pipeline.split()], check=True, cwd=ROOT)
     meta = capture_import.import_capture(videos["face"], videos["monitor"], tmp_path / "session", fps=10)
     cap = data.Capture.load(tmp_path / "session")
     assert meta["frames"] == len(cap.face) >= 6

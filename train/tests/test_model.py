@@ -1,8 +1,6 @@
 """The trained network: de-lighting removes source light; training is reproducible
 and resumable; export matches PyTorch and loads in ONNX Runtime."""
 
-import json
-
 import numpy as np
 import onnxruntime as ort
 import torch
@@ -16,6 +14,18 @@ def session(path):
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
 
 
+def standardised_distance(a: list[np.ndarray], b: list[np.ndarray]) -> float:
+    """Mean over feature levels of the RMS difference of two images' features, each channel in
+    units of its standard deviation over both images. Instance normalisation changes each channel's
+    offset and scale, so raw distances would compare the two representations' units, not their content."""
+    out = []
+    for x, y in zip(a, b):
+        both = np.concatenate([x, y])
+        std = both.std(axis=(0, 2, 3), keepdims=True) + 1e-6
+        out.append(np.sqrt((((x - y) / std) ** 2).mean()))
+    return float(np.mean(out))
+
+
 def test_delighting_removes_the_source_light(sim_data, shipped_model):
     """The de-lit features of one face under two monitor lights are measurably closer
     than the raw encoder features (paper section 3.2)."""
@@ -25,24 +35,21 @@ def test_delighting_removes_the_source_light(sim_data, shipped_model):
     enc = session(shipped_model / "encoder.onnx")
     delight = session(shipped_model / "delight.onnx")
     light_encoder = session(shipped_model / "light_encoder.onnx")
+    names = [o.name for o in enc.get_outputs()]
+
+    def features(pose: int, light: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
+        image = data.to_tensor(data.area_resize(held.clean[pose, light], res))[None].numpy()
+        raw = dict(zip(names, enc.run(None, {"image": image})))
+        (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
+        delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
+        return [raw[f"e{i}"] for i in range(1, 8)], delit
+
     ratios = []
-    for pose in range(held.images.shape[0]):
-        feats = []
-        for light in (0, 5):  # a bright outdoor map and a white text page
-            image = data.to_tensor(data.area_resize(held.clean[pose, light], res))[None].numpy()
-            raw = dict(zip([o.name for o in enc.get_outputs()], enc.run(None, {"image": image})))
-            (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
-            delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
-            feats.append(([raw[f"e{i}"] for i in range(1, 8)], delit))
-        (raw_a, del_a), (raw_b, del_b) = feats
-
-        def rel(a, b):
-            return np.mean(
-                [np.linalg.norm(x - y) / (0.5 * (np.linalg.norm(x) + np.linalg.norm(y))) for x, y in zip(a, b)]
-            )
-
-        ratios.append(rel(del_a, del_b) / rel(raw_a, raw_b))
-    assert np.median(ratios) < 0.9, ratios
+    for a, b in [(0, 5), (2, 3), (0, 8), (4, 6)]:  # outdoor map and text page, two patches, ...
+        for pose in range(held.images.shape[0]):
+            (raw_a, del_a), (raw_b, del_b) = features(pose, a), features(pose, b)
+            ratios.append(standardised_distance(del_a, del_b) / standardised_distance(raw_a, raw_b))
+    assert np.median(ratios) < 0.95, np.round(ratios, 3)
 
 
 def tiny_config(steps: int) -> train.TrainConfig:
@@ -56,12 +63,8 @@ def test_training_smoke_resume_and_export(sim_data, tmp_path):
     device = torch.device("cpu")
     # Four steps in one go ...
     train.train(tiny_config(4), sim_data, tmp_path / "straight", resume=False, checkpoint_every=2, device=device)
-    # ... and two, then two more after a resume, give the same weights.
-    train.train(tiny_config(2), sim_data, tmp_path / "resumed", resume=False, checkpoint_every=2, device=device)
-    cfg_path = tmp_path / "resumed" / "config.json"
-    cfg = json.loads(cfg_path.read_text())
-    cfg["steps"] = 4
-    cfg_path.write_text(json.dumps(cfg))
+    # ... and the same run stopped after two and resumed give the same weights.
+    train.train(tiny_config(4), sim_data, tmp_path / "resumed", False, checkpoint_every=2, device=device, stop_at=2)
     train.train(tiny_config(4), sim_data, tmp_path / "resumed", resume=True, checkpoint_every=2, device=device)
     a = torch.load(tmp_path / "straight" / "checkpoint.pt", weights_only=False)["net"]
     b = torch.load(tmp_path / "resumed" / "checkpoint.pt", weights_only=False)["net"]
