@@ -130,7 +130,11 @@ fn same_rate_picks_the_frame_shown_at_the_same_time() {
 
 #[test]
 fn faster_and_slower_monitor_streams() {
-    run_non_live(30, 60, 2, 0, 0, u64::MAX).check(0, "30 fps face, 60 fps monitor");
+    let fast = run_non_live(30, 60, 2, 0, 0, u64::MAX);
+    fast.check(0, "30 fps face, 60 fps monitor");
+    // Every monitor frame is read, but only those a face frame uses are decoded.
+    assert_eq!(stat(&fast.element, "monitor-frames"), 120);
+    assert!(stat(&fast.element, "monitor-decoded") <= fast.faces.len() as u64);
     run_non_live(30, 10, 2, 0, 0, u64::MAX).check(0, "30 fps face, 10 fps monitor");
 }
 

@@ -174,7 +174,24 @@ struct Shown {
     /// Running time until which it counts as on screen: its duration or
     /// `monitor-timeout` after `at`, whichever is longer.
     valid_until: i64,
-    light: Light,
+    /// The frame, until a face frame needs its light; a frame that a newer one
+    /// replaces before then is never decoded.
+    frame: Option<gst::Buffer>,
+    light: Option<Light>,
+}
+
+impl Shown {
+    fn light(&mut self, info: Option<&gst_video::VideoInfo>) -> Option<Light> {
+        if self.light.is_none()
+            && let (Some(buffer), Some(info)) = (self.frame.take(), info)
+            && let Ok(frame) =
+                gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), info)
+            && let Some(view) = frame_view(&frame)
+        {
+            self.light = Some(Light::from_frame(&view));
+        }
+        self.light.clone()
+    }
 }
 
 #[derive(Default)]
@@ -202,6 +219,8 @@ struct Stats {
     fallbacks: u64,
     resets: u64,
     monitor_frames: u64,
+    /// Monitor frames whose light was computed: the ones face frames used.
+    monitor_decoded: u64,
     monitor_out: u64,
     monitor_dropped: u64,
 }
@@ -598,24 +617,17 @@ impl LsydRelight {
                     if !shown_by_target {
                         break End::Later;
                     }
-                    if let Some(info) = &track.info
-                        && let Ok(frame) = gst_video::VideoFrameRef::from_buffer_ref_readable(
-                            buffer.as_ref(),
-                            info,
-                        )
-                        && let Some(view) = frame_view(&frame)
-                    {
-                        let at = rt.or(target).unwrap_or(0);
-                        let hold = buffer
-                            .duration()
-                            .unwrap_or(gst::ClockTime::ZERO)
-                            .max(s.monitor_timeout);
-                        track.current = Some(Shown {
-                            at,
-                            valid_until: at.saturating_add(hold.nseconds() as i64),
-                            light: Light::from_frame(&view),
-                        });
-                    }
+                    let at = rt.or(target).unwrap_or(0);
+                    let hold = buffer
+                        .duration()
+                        .unwrap_or(gst::ClockTime::ZERO)
+                        .max(s.monitor_timeout);
+                    track.current = Some(Shown {
+                        at,
+                        valid_until: at.saturating_add(hold.nseconds() as i64),
+                        frame: Some(buffer),
+                        light: None,
+                    });
                     lock(&self.stats).monitor_frames += 1;
                     pad.drop_buffer();
                 }
@@ -624,18 +636,28 @@ impl LsydRelight {
                 None => return MonitorDecision::Wait,
             }
         };
+        let track = &mut *track;
+        let info = track.info.as_ref();
+        let known = |c: &mut Shown| match {
+            if c.light.is_none() {
+                lock(&self.stats).monitor_decoded += 1;
+            }
+            c.light(info)
+        } {
+            Some(l) => MonitorDecision::Known(l, c.at),
+            // A frame that cannot be read (no caps yet) cannot light anything.
+            None => MonitorDecision::Fallback(Fallback::NotStarted),
+        };
         let Some(target) = target else {
-            return match &track.current {
-                Some(c) => MonitorDecision::Known(c.light.clone(), c.at),
+            return match track.current.as_mut() {
+                Some(c) => known(c),
                 None => MonitorDecision::Fallback(Fallback::NoTimestamp),
             };
         };
         // Decided by running times alone, so the outcome does not depend on how far
         // behind real time the element runs.
-        match (&track.current, end) {
-            (Some(c), _) if target <= c.valid_until => {
-                MonitorDecision::Known(c.light.clone(), c.at)
-            }
+        match (track.current.as_mut(), end) {
+            (Some(c), _) if target <= c.valid_until => known(c),
             (_, End::Ended) => MonitorDecision::Fallback(Fallback::Ended),
             (None, _) => MonitorDecision::Fallback(Fallback::NotStarted),
             (Some(_), _) => MonitorDecision::Fallback(Fallback::Stalled),
@@ -1042,6 +1064,7 @@ impl LsydRelight {
             .field("fallbacks", s.fallbacks)
             .field("resets", s.resets)
             .field("monitor-frames", s.monitor_frames)
+            .field("monitor-decoded", s.monitor_decoded)
             .field("monitor-out", s.monitor_out)
             .field("monitor-dropped", s.monitor_dropped)
             .field("target-encodes", c.target_encodes)
