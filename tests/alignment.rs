@@ -133,7 +133,9 @@ fn faster_and_slower_monitor_streams() {
     let fast = run_non_live(30, 60, 2, 0, 0, u64::MAX);
     fast.check(0, "30 fps face, 60 fps monitor");
     // Every monitor frame is read, but only those a face frame uses are decoded.
-    assert_eq!(stat(&fast.element, "monitor-frames"), 120);
+    let last_face = *fast.faces.last().unwrap();
+    let shown = fast.monitor.iter().filter(|&&m| m <= last_face).count() as u64;
+    assert_eq!(stat(&fast.element, "monitor-frames"), shown);
     assert!(stat(&fast.element, "monitor-decoded") <= fast.faces.len() as u64);
     run_non_live(30, 10, 2, 0, 0, u64::MAX).check(0, "30 fps face, 10 fps monitor");
 }
