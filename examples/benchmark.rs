@@ -418,13 +418,7 @@ fn main() -> Result<(), String> {
         println!("{}", serde_json::to_string(&r).unwrap());
         return Ok(());
     }
-    let flag = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let out = flag("--out")
+    let out = common::flag("--out")
         .map(PathBuf::from)
         .unwrap_or_else(|| common::checkout().join("results/benchmark"));
     let quick = args.iter().any(|a| a == "--quick");

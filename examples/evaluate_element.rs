@@ -14,18 +14,12 @@ use std::path::PathBuf;
 
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let flag = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
-    let recording = flag("--recording").unwrap_or_else(|| "call".into());
-    let frames: usize = flag("--frames")
+    let recording = common::flag("--recording").unwrap_or_else(|| "call".into());
+    let frames: usize = common::flag("--frames")
         .map(|f| f.parse().map_err(|_| "bad --frames"))
         .transpose()?
         .unwrap_or(90);
-    let model = flag("--model")
+    let model = common::flag("--model")
         .map(PathBuf::from)
         .unwrap_or_else(common::default_model);
     let record = args.iter().any(|a| a == "--record");

@@ -15,23 +15,9 @@ use std::time::Instant;
 use deskstage::content::{Clip, Playlist};
 use deskstage::dataset::Recording;
 use gstlsydrelight::engine::{self, Provider, Relighter, Source, Temporal};
-use gstlsydrelight::frame::{Crop, Frame, PixelFormat, Plane, YuvMatrix, sample_crop};
+use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-
-fn view(img: &deskstage::monitor::RgbImage) -> Frame<'_> {
-    let p = Plane {
-        data: &img.data,
-        stride: img.width * 3,
-    };
-    Frame {
-        format: PixelFormat::Rgb,
-        width: img.width,
-        height: img.height,
-        planes: [p, p, p],
-        matrix: YuvMatrix::BT601_LIMITED,
-    }
-}
 
 fn rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
@@ -50,18 +36,11 @@ fn rss_mb() -> f64 {
 }
 
 fn main() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let flag = |name: &str| {
-        args.iter()
-            .position(|a| a == name)
-            .and_then(|i| args.get(i + 1))
-            .cloned()
-    };
     let frames: usize =
-        flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
+        common::flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
     let threads: usize =
-        flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
-    let model = flag("--model")
+        common::flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
+    let model = common::flag("--model")
         .map(std::path::PathBuf::from)
         .unwrap_or_else(common::default_model);
 
@@ -77,16 +56,15 @@ fn main() -> Result<(), String> {
     let inputs: Vec<(Vec<f32>, Light)> = (0..60)
         .map(|i| {
             let f = rec.frame(i * 5, false);
-            let crop = Crop::centred(f.face.width, f.face.height, 0.5, 0.5, 1.0);
+            let monitor = Frame::packed_rgb(&f.monitor.data, f.monitor.width, f.monitor.height);
             (
-                sample_crop(&view(&f.face), crop, res),
-                Light::from_frame(&view(&f.monitor)),
+                common::network_input(&f.face, res),
+                Light::from_frame(&monitor),
             )
         })
         .collect();
-    let probe_light = Light::from_frame(&view(
-        &Playlist::still(Clip::Solid(deskstage::math::Vec3::new(0.7, 0.7, 0.7))).frame(0.0),
-    ));
+    let grey = Playlist::still(Clip::Solid(deskstage::math::Vec3::new(0.7, 0.7, 0.7))).frame(0.0);
+    let probe_light = Light::from_frame(&Frame::packed_rgb(&grey.data, grey.width, grey.height));
     let probe = |r: &mut Relighter| -> Result<Vec<f32>, String> {
         let mut out = Vec::new();
         for _ in 0..60 {

@@ -114,6 +114,23 @@ pub struct Frame<'a> {
     pub matrix: YuvMatrix,
 }
 
+impl<'a> Frame<'a> {
+    /// A view of tightly packed 8-bit RGB pixels.
+    pub fn packed_rgb(data: &'a [u8], width: usize, height: usize) -> Frame<'a> {
+        let plane = Plane {
+            data,
+            stride: width * 3,
+        };
+        Frame {
+            format: PixelFormat::Rgb,
+            width,
+            height,
+            planes: [plane, plane, plane],
+            matrix: YuvMatrix::BT601_LIMITED,
+        }
+    }
+}
+
 /// A frame being written.
 pub struct FrameMut<'a> {
     pub format: PixelFormat,
@@ -483,20 +500,6 @@ mod tests {
         v
     }
 
-    fn view(data: &[u8], w: usize, h: usize) -> Frame<'_> {
-        let p = Plane {
-            data,
-            stride: w * 3,
-        };
-        Frame {
-            format: PixelFormat::Rgb,
-            width: w,
-            height: h,
-            planes: [p, p, p],
-            matrix: YuvMatrix::BT601_LIMITED,
-        }
-    }
-
     #[test]
     fn yuv_matrix_round_trips() {
         for m in [YuvMatrix::BT601_LIMITED, YuvMatrix::BT709_LIMITED] {
@@ -534,7 +537,7 @@ mod tests {
     fn area_resample_of_a_uniform_crop_is_uniform() {
         let data = rgb_frame(100, 80, |_, _| [200, 100, 50]);
         let out = sample_crop(
-            &view(&data, 100, 80),
+            &Frame::packed_rgb(&data, 100, 80),
             Crop {
                 x: 10,
                 y: 4,
@@ -558,7 +561,7 @@ mod tests {
             y: 0,
             size: 64,
         };
-        let input = sample_crop(&view(&data, 64, 64), crop, 16);
+        let input = sample_crop(&Frame::packed_rgb(&data, 64, 64), crop, 16);
         let change = LightingChange::new(
             &input,
             &input,

@@ -147,26 +147,11 @@ fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{Plane, YuvMatrix};
-
-    fn rgb_frame(data: &[u8], w: usize, h: usize) -> Frame<'_> {
-        let p = Plane {
-            data,
-            stride: w * 3,
-        };
-        Frame {
-            format: PixelFormat::Rgb,
-            width: w,
-            height: h,
-            planes: [p, p, p],
-            matrix: YuvMatrix::BT601_LIMITED,
-        }
-    }
 
     #[test]
     fn white_frame_is_unit_light() {
         let data = vec![255u8; 100 * 50 * 3];
-        let l = Light::from_frame(&rgb_frame(&data, 100, 50));
+        let l = Light::from_frame(&Frame::packed_rgb(&data, 100, 50));
         assert!(l.0.iter().all(|v| (v - 1.0).abs() < 1e-5));
     }
 
@@ -179,7 +164,7 @@ mod tests {
                 data[(y * w + x) * 3] = 255;
             }
         }
-        let l = Light::from_frame(&rgb_frame(&data, w, h));
+        let l = Light::from_frame(&Frame::packed_rgb(&data, w, h));
         let red = |r: usize, c: usize| l.0[r * LIGHT_COLS + c];
         assert!((red(0, 0) - 1.0).abs() < 1e-5);
         assert!(red(LIGHT_ROWS - 1, LIGHT_COLS - 1).abs() < 1e-6);
@@ -193,7 +178,7 @@ mod tests {
         for y in 0..h {
             data[(y * w) * 3 + 1] = 255; // column 0 green
         }
-        let l = Light::from_frame(&rgb_frame(&data, w, h));
+        let l = Light::from_frame(&Frame::packed_rgb(&data, w, h));
         let green = |c: usize| l.0[LIGHT_ROWS * LIGHT_COLS + c];
         assert!((green(0) - 1.0 / 1.5).abs() < 1e-5, "{}", green(0));
         assert!(green(1).abs() < 1e-6);

@@ -9,7 +9,6 @@ use std::path::Path;
 use gstlsydrelight::engine::{
     self, ContractError, EngineError, Provider, Relighter, Source, Temporal,
 };
-use gstlsydrelight::frame::{Crop, Frame, PixelFormat, Plane, YuvMatrix, sample_crop};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use support::*;
@@ -24,23 +23,7 @@ fn relighter(temporal: Temporal) -> Relighter {
 }
 
 fn image(r: &Relighter, monitor: deskstage::math::Vec3) -> Vec<f32> {
-    let img = render_face(monitor);
-    let plane = Plane {
-        data: &img.data,
-        stride: img.width * 3,
-    };
-    let frame = Frame {
-        format: PixelFormat::Rgb,
-        width: img.width,
-        height: img.height,
-        planes: [plane, plane, plane],
-        matrix: YuvMatrix::BT601_LIMITED,
-    };
-    sample_crop(
-        &frame,
-        Crop::centred(img.width, img.height, 0.5, 0.5, 1.0),
-        r.resolution(),
-    )
+    common::network_input(&render_face(monitor), r.resolution())
 }
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {

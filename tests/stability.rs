@@ -6,7 +6,6 @@ mod support;
 
 use deskstage::math::Vec3;
 use gstlsydrelight::engine::{self, Provider, Relighter, Source, Temporal};
-use gstlsydrelight::frame::{Crop, Frame, PixelFormat, Plane, YuvMatrix, sample_crop};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use support::*;
@@ -24,25 +23,6 @@ fn relighter(threads: usize) -> Relighter {
     .unwrap();
     r.set_target(&Light::uniform([0.9, 0.7, 0.5])).unwrap();
     r
-}
-
-fn crop_of(img: &deskstage::monitor::RgbImage, res: usize) -> Vec<f32> {
-    let plane = Plane {
-        data: &img.data,
-        stride: img.width * 3,
-    };
-    let frame = Frame {
-        format: PixelFormat::Rgb,
-        width: img.width,
-        height: img.height,
-        planes: [plane, plane, plane],
-        matrix: YuvMatrix::BT601_LIMITED,
-    };
-    sample_crop(
-        &frame,
-        Crop::centred(img.width, img.height, 0.5, 0.5, 1.0),
-        res,
-    )
 }
 
 fn uniform_image(res: usize, rgb: [f32; 3]) -> Vec<f32> {
@@ -82,7 +62,7 @@ fn long_runs_stay_finite_flat_and_without_drift() {
         Vec3::new(0.9, 0.5, 0.1),
     ]
     .iter()
-    .map(|&m| crop_of(&render_face(m), res))
+    .map(|&m| common::network_input(&render_face(m), res))
     .collect();
     let lights = [
         Light::uniform([1.0; 3]),
@@ -173,7 +153,7 @@ fn extreme_faces_and_flat_regions_stay_finite() {
 #[test]
 fn strobing_monitor_stays_bounded() {
     let mut r = relighter(2);
-    let face = crop_of(face_rgb(), r.resolution());
+    let face = common::network_input(face_rgb(), r.resolution());
     let (black, white) = (Light::uniform([0.0; 3]), Light::uniform([1.0; 3]));
     let mut previous: Option<Vec<f32>> = None;
     let mut biggest_step = 0.0f32;
@@ -211,7 +191,7 @@ fn target_equal_to_source_changes_little() {
     let mut r = relighter(2);
     let res = r.resolution();
     let light = Light::uniform([0.8, 0.8, 0.8]);
-    let face = crop_of(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
+    let face = common::network_input(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
     r.set_target(&light).unwrap();
     let same = r
         .process(&face, Source::Known(light.clone()), false)
@@ -242,8 +222,8 @@ fn identical_input_gives_identical_output() {
         let mut r = relighter(threads);
         let res = r.resolution();
         let faces = [
-            crop_of(face_rgb(), res),
-            crop_of(&render_face(Vec3::new(0.3, 0.3, 0.8)), res),
+            common::network_input(face_rgb(), res),
+            common::network_input(&render_face(Vec3::new(0.3, 0.3, 0.8)), res),
         ];
         (0..6)
             .map(|i| {

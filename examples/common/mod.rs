@@ -6,12 +6,21 @@
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use deskstage::io::Y4mReader;
 use deskstage::monitor::RgbImage;
 use gst::prelude::*;
 use gst_video::prelude::*;
+
+/// The value after `--name` on the command line.
+pub fn flag(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .and_then(|i| args.get(i + 1))
+        .cloned()
+}
 
 /// Registers the plugin statically (once) so pipelines find `lsydrelight`.
 pub fn init() {
@@ -231,5 +240,13 @@ pub fn ensure_recording(dir: &Path, name: &str, frames: usize) -> Result<(), Str
     rec.write(dir).map_err(|e| e.to_string())
 }
 
-/// Upper bound of the time a frame may take, to fail instead of hanging.
-pub const FRAME_TIMEOUT: Duration = Duration::from_secs(60);
+/// The network's input for an RGB image: its centred full-height square at `res`.
+pub fn network_input(img: &RgbImage, res: usize) -> Vec<f32> {
+    use gstlsydrelight::frame::{Crop, Frame, sample_crop};
+    let frame = Frame::packed_rgb(&img.data, img.width, img.height);
+    sample_crop(
+        &frame,
+        Crop::centred(img.width, img.height, 0.5, 0.5, 1.0),
+        res,
+    )
+}

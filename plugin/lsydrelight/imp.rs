@@ -543,17 +543,7 @@ fn load_target(path: &std::path::Path) -> Result<Light, String> {
             }
         })
         .collect();
-    let plane = Plane {
-        data: &rgb,
-        stride: w * 3,
-    };
-    Ok(Light::from_frame(&Frame {
-        format: PixelFormat::Rgb,
-        width: w,
-        height: h,
-        planes: [plane, plane, plane],
-        matrix: YuvMatrix::BT601_LIMITED,
-    }))
+    Ok(Light::from_frame(&Frame::packed_rgb(&rgb, w, h)))
 }
 
 fn running_time(
@@ -638,15 +628,15 @@ impl LsydRelight {
         };
         let track = &mut *track;
         let info = track.info.as_ref();
-        let known = |c: &mut Shown| match {
+        let known = |c: &mut Shown| {
             if c.light.is_none() {
                 lock(&self.stats).monitor_decoded += 1;
             }
-            c.light(info)
-        } {
-            Some(l) => MonitorDecision::Known(l, c.at),
-            // A frame that cannot be read (no caps yet) cannot light anything.
-            None => MonitorDecision::Fallback(Fallback::NotStarted),
+            match c.light(info) {
+                Some(l) => MonitorDecision::Known(l, c.at),
+                // A frame that cannot be read (no caps yet) cannot light anything.
+                None => MonitorDecision::Fallback(Fallback::NotStarted),
+            }
         };
         let Some(target) = target else {
             return match track.current.as_mut() {

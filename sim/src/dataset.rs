@@ -78,6 +78,22 @@ pub fn keypoints(r: &Renderer, state: &State) -> Vec<[f32; 2]> {
     }
 }
 
+/// Still frames of clips and their cell lights.
+fn still_lights(r: &Renderer, clips: &[Clip]) -> (Vec<RgbImage>, Vec<CellLight>) {
+    let shown: Vec<RgbImage> = clips
+        .iter()
+        .map(|c| Playlist::still(c.clone()).frame(0.0))
+        .collect();
+    let cells = shown.iter().map(|f| light_of(r, f)).collect();
+    (shown, cells)
+}
+
+/// The renderer of captures and the held-out set: a square camera on the default desk.
+fn square_renderer(subject_seed: u64, size: usize) -> io::Result<Renderer> {
+    Renderer::new(Scene::new(Subject::from_seed(subject_seed), size, size))
+        .map_err(io::Error::other)
+}
+
 /// The monitor's cell light for a frame it shows.
 pub fn light_of(r: &Renderer, frame: &RgbImage) -> CellLight {
     CellLight::from_frame(frame, r.scene.monitor.rows, r.scene.monitor.cols)
@@ -132,12 +148,7 @@ struct CaptureMeta<'a> {
 /// `keypoints.npy`, `truth.npy` and `meta.json` in `dir`.
 pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = Renderer::new(Scene::new(
-        Subject::from_seed(spec.subject_seed),
-        spec.size,
-        spec.size,
-    ))
-    .map_err(io::Error::other)?;
+    let r = square_renderer(spec.subject_seed, spec.size)?;
     let domain = format!("train-{session}");
     let look = Look::random(spec.seed, &domain);
     let motion = Trajectory::random(
@@ -203,12 +214,7 @@ pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Resu
 /// lights: `face.npy` (poses, lights, S, S, 3), `monitor.npy`, `keypoints.npy`, `truth.npy`.
 pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = Renderer::new(Scene::new(
-        Subject::from_seed(spec.subject_seed),
-        spec.size,
-        spec.size,
-    ))
-    .map_err(io::Error::other)?;
+    let r = square_renderer(spec.subject_seed, spec.size)?;
     let s = spec.size;
     let sensor = Sensor::default();
     let mut face =
@@ -261,12 +267,7 @@ pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize)
 /// monitor content and room light: `face.npy` (frames, S, S, 3).
 pub fn write_absent(dir: &Path, spec: &CaptureSpec, frames: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = Renderer::new(Scene::new(
-        Subject::from_seed(spec.subject_seed),
-        spec.size,
-        spec.size,
-    ))
-    .map_err(io::Error::other)?;
+    let r = square_renderer(spec.subject_seed, spec.size)?;
     let s = spec.size;
     let mut face = crate::io::NpyWriter::<u8>::create(&dir.join("face.npy"), &[frames, s, s, 3])?;
     let mut rng = Rng::stream(spec.seed, "absent");
@@ -362,14 +363,9 @@ pub fn heldout_look() -> Look {
 /// ground truth), `monitor.npy` (9, H, W, 3), `keypoints.npy` and `truth.npy`.
 pub fn write_heldout(dir: &Path, subject_seed: u64, size: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), size, size))
-        .map_err(io::Error::other)?;
+    let r = square_renderer(subject_seed, size)?;
     let clips = content::heldout_clips(subject_seed);
-    let shown: Vec<RgbImage> = clips
-        .iter()
-        .map(|c| Playlist::still(c.clone()).frame(0.0))
-        .collect();
-    let cells: Vec<CellLight> = shown.iter().map(|f| light_of(&r, f)).collect();
+    let (shown, cells) = still_lights(&r, &clips);
     let refs: Vec<&CellLight> = cells.iter().collect();
     let states = heldout_states();
     let (np, nl) = (states.len(), refs.len());
@@ -661,11 +657,7 @@ pub fn contact_sheet(subject_seed: u64, cell: usize) -> Result<RgbImage, String>
     let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), cell, cell))?;
     let mut clips: Vec<Clip> = content::heldout_clips(subject_seed);
     clips.truncate(6);
-    let shown: Vec<RgbImage> = clips
-        .iter()
-        .map(|c| Playlist::still(c.clone()).frame(0.0))
-        .collect();
-    let cells: Vec<CellLight> = shown.iter().map(|f| light_of(&r, f)).collect();
+    let (shown, cells) = still_lights(&r, &clips);
     let refs: Vec<&CellLight> = cells.iter().collect();
     let states: Vec<State> = heldout_states().into_iter().take(4).collect();
     let look = Look::default();

@@ -93,33 +93,40 @@ fn rgb_buffer(img: &RgbImage) -> gst::Buffer {
     buffer
 }
 
-/// An RGB image as a buffer of `caps` (converted by GStreamer's converter), stamped at `pts`.
+/// A buffer converted by GStreamer's converter from one video format to another.
+fn convert(
+    buffer: gst::Buffer,
+    from: &gst_video::VideoInfo,
+    to: &gst_video::VideoInfo,
+) -> gst::Buffer {
+    let src = gst_video::VideoFrame::from_buffer_readable(buffer, from).unwrap();
+    let mut dst =
+        gst_video::VideoFrame::from_buffer_writable(gst::Buffer::with_size(to.size()).unwrap(), to)
+            .unwrap();
+    gst_video::VideoConverter::new(from, to, None)
+        .unwrap()
+        .frame(&src, &mut dst);
+    dst.into_buffer()
+}
+
+/// Packed RGB of the same size, rate and colorimetry as `info`.
+fn rgb_info(info: &gst_video::VideoInfo) -> gst_video::VideoInfo {
+    gst_video::VideoInfo::builder(gst_video::VideoFormat::Rgb, info.width(), info.height())
+        .colorimetry(&info.colorimetry())
+        .fps(info.fps())
+        .build()
+        .unwrap()
+}
+
+/// An RGB image as a buffer of `caps`, stamped at `pts`.
 pub fn buffer(
     img: &RgbImage,
     caps: &gst::Caps,
     pts: gst::ClockTime,
     duration: gst::ClockTime,
 ) -> gst::Buffer {
-    let out_info = gst_video::VideoInfo::from_caps(caps).unwrap();
-    let in_info = gst_video::VideoInfo::builder(
-        gst_video::VideoFormat::Rgb,
-        img.width as u32,
-        img.height as u32,
-    )
-    .colorimetry(&out_info.colorimetry())
-    .fps(out_info.fps())
-    .build()
-    .unwrap();
-    let src = gst_video::VideoFrame::from_buffer_readable(rgb_buffer(img), &in_info).unwrap();
-    let mut dst = gst_video::VideoFrame::from_buffer_writable(
-        gst::Buffer::with_size(out_info.size()).unwrap(),
-        &out_info,
-    )
-    .unwrap();
-    gst_video::VideoConverter::new(&in_info, &out_info, None)
-        .unwrap()
-        .frame(&src, &mut dst);
-    let mut out = dst.into_buffer();
+    let info = gst_video::VideoInfo::from_caps(caps).unwrap();
+    let mut out = convert(rgb_buffer(img), &rgb_info(&info), &info);
     {
         let b = out.get_mut().unwrap();
         b.set_pts(pts);
@@ -128,31 +135,15 @@ pub fn buffer(
     out
 }
 
-/// A buffer as an RGB image (converted from its caps).
+/// A buffer of `caps` as an RGB image.
 pub fn to_rgb(buffer: &gst::Buffer, caps: &gst::Caps) -> RgbImage {
-    let in_info = gst_video::VideoInfo::from_caps(caps).unwrap();
-    let out_info = gst_video::VideoInfo::builder(
-        gst_video::VideoFormat::Rgb,
-        in_info.width(),
-        in_info.height(),
-    )
-    .colorimetry(&in_info.colorimetry())
-    .fps(in_info.fps())
-    .build()
-    .unwrap();
-    let src = gst_video::VideoFrame::from_buffer_readable(buffer.clone(), &in_info).unwrap();
-    let mut dst = gst_video::VideoFrame::from_buffer_writable(
-        gst::Buffer::with_size(out_info.size()).unwrap(),
-        &out_info,
-    )
-    .unwrap();
-    gst_video::VideoConverter::new(&in_info, &out_info, None)
-        .unwrap()
-        .frame(&src, &mut dst);
-    let f = gst_video::VideoFrame::from_buffer_readable(dst.into_buffer(), &out_info).unwrap();
+    let info = gst_video::VideoInfo::from_caps(caps).unwrap();
+    let rgb = rgb_info(&info);
+    let f = gst_video::VideoFrame::from_buffer_readable(convert(buffer.clone(), &info, &rgb), &rgb)
+        .unwrap();
     let stride = f.plane_stride()[0] as usize;
     let data = f.plane_data(0).unwrap();
-    let (w, h) = (in_info.width() as usize, in_info.height() as usize);
+    let (w, h) = (info.width() as usize, info.height() as usize);
     let mut img = RgbImage::new(w, h);
     for y in 0..h {
         img.data[y * w * 3..(y + 1) * w * 3].copy_from_slice(&data[y * stride..y * stride + w * 3]);

@@ -21,8 +21,9 @@ def _gauss_kernel(size: int = 11, sigma: float = 1.5) -> torch.Tensor:
     return (g[:, None] * g[None, :])[None, None]
 
 
-def ssim(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
-    """Mean SSIM of images in [0, 1] (Wang et al. 2004, 11x11 Gaussian window)."""
+def ssim_maps(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """SSIM's luminance and contrast-structure maps of images in [0, 1]
+    (Wang et al. 2004, 11x11 Gaussian window of sigma 1.5)."""
     c = a.shape[1]
     k = _gauss_kernel().to(a).expand(c, 1, -1, -1)
 
@@ -34,8 +35,15 @@ def ssim(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     var_b = blur(b * b) - mu_b**2
     cov = blur(a * b) - mu_a * mu_b
     c1, c2 = 0.01**2, 0.03**2
-    s = ((2 * mu_a * mu_b + c1) * (2 * cov + c2)) / ((mu_a**2 + mu_b**2 + c1) * (var_a + var_b + c2))
-    return s.mean()
+    luminance = (2 * mu_a * mu_b + c1) / (mu_a**2 + mu_b**2 + c1)
+    contrast_structure = (2 * cov + c2) / (var_a + var_b + c2)
+    return luminance, contrast_structure
+
+
+def ssim(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
+    """Mean SSIM of images in [0, 1]."""
+    luminance, contrast_structure = ssim_maps(a, b)
+    return (luminance * contrast_structure).mean()
 
 
 def laplacian_l1(a: torch.Tensor, b: torch.Tensor, levels: int = 4) -> torch.Tensor:

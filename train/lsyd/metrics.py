@@ -32,31 +32,15 @@ def rmse(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.sqrt((d * d).mean()))
 
 
-def _ssim_parts(a: torch.Tensor, b: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    c = a.shape[1]
-    k = losses._gauss_kernel().to(a).expand(c, 1, -1, -1)
-
-    def blur(x):
-        return F.conv2d(x, k, groups=c)
-
-    mu_a, mu_b = blur(a), blur(b)
-    var_a = blur(a * a) - mu_a**2
-    var_b = blur(b * b) - mu_b**2
-    cov = blur(a * b) - mu_a * mu_b
-    c1, c2 = 0.01**2, 0.03**2
-    cs = (2 * cov + c2) / (var_a + var_b + c2)
-    lum = (2 * mu_a * mu_b + c1) / (mu_a**2 + mu_b**2 + c1)
-    return (lum * cs).mean(), cs.mean()
-
-
 def ms_ssim(a: np.ndarray, b: np.ndarray) -> float:
     """MS-SSIM of two HxWx3 images in [0, 255]; needs at least 176 pixels a side."""
     ta = torch.from_numpy(np.ascontiguousarray(a, dtype=np.float32)).permute(2, 0, 1)[None] / 255.0
     tb = torch.from_numpy(np.ascontiguousarray(b, dtype=np.float32)).permute(2, 0, 1)[None] / 255.0
     vals = []
     for i, _ in enumerate(MS_SSIM_WEIGHTS):
-        ssim_full, cs = _ssim_parts(ta, tb)
-        vals.append(ssim_full if i == len(MS_SSIM_WEIGHTS) - 1 else cs)
+        luminance, cs = losses.ssim_maps(ta, tb)
+        # Contrast-structure at every scale; luminance too at the coarsest.
+        vals.append((luminance * cs).mean() if i == len(MS_SSIM_WEIGHTS) - 1 else cs.mean())
         ta, tb = F.avg_pool2d(ta, 2), F.avg_pool2d(tb, 2)
     out = torch.ones(())
     for v, w in zip(vals, MS_SSIM_WEIGHTS):

@@ -247,9 +247,7 @@ class SunNet(nn.Module):
     def forward(self, image, source_light, target_light):
         stem, feats = self.encoder(image)
         predicted = self.bottleneck_light(feats[6])
-        code = self.light_encoder(target_light)
-        tiled = code[:, :, None, None].expand(-1, -1, *feats[6].shape[2:])
-        bottleneck = act(self.inject(torch.cat([feats[6], tiled], 1)))
+        bottleneck = act(self.inject(with_codes(feats[6], self.light_encoder(target_light))))
         return self.decoder(stem, feats[:6] + [bottleneck], None), predicted
 
 
@@ -271,9 +269,13 @@ class SenguptaNet(nn.Module):
             raise ValueError("Sengupta et al. 2021 needs the source light")
         stem, feats = self.encoder(image)
         codes = torch.cat([self.light_encoder(source_light), self.light_encoder(target_light)], 1)
-        tiled = codes[:, :, None, None].expand(-1, -1, *feats[6].shape[2:])
-        bottleneck = act(self.inject(torch.cat([feats[6], tiled], 1)))
+        bottleneck = act(self.inject(with_codes(feats[6], codes)))
         return self.decoder(stem, feats[:6] + [bottleneck], None), None
+
+
+def with_codes(features: torch.Tensor, codes: torch.Tensor) -> torch.Tensor:
+    """Light codes tiled over a feature map's positions and stacked onto its channels."""
+    return torch.cat([features, codes[:, :, None, None].expand(-1, -1, *features.shape[2:])], 1)
 
 
 def build(cfg: NetConfig) -> nn.Module:
