@@ -1,0 +1,258 @@
+//! Scene-adaptive compute: each skip does what it says, is counted, can be
+//! turned off, and keeps the output and the temporal state correct.
+
+mod support;
+
+use deskstage::material::Look;
+use deskstage::math::Vec3;
+use deskstage::monitor::{CellLight, RgbImage};
+use deskstage::render::{Renderer, Scene, Sensor};
+use deskstage::subject::{Pose, State, Subject};
+use gst::prelude::*;
+use gst_check::Harness;
+use support::*;
+
+fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness, gst::Caps) {
+    let e = element();
+    configure(&e);
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    h.set_src_caps(c.clone());
+    (e, h, c)
+}
+
+fn push(h: &mut Harness, c: &gst::Caps, img: &RgbImage, i: u64) -> RgbImage {
+    h.push(buffer(img, c, frame_time(i), FRAME)).unwrap();
+    to_rgb(&h.pull().unwrap(), c)
+}
+
+fn render(state: State, monitor: Vec3) -> RgbImage {
+    let r = Renderer::new(Scene::new(
+        Subject::default(),
+        FACE_W as usize,
+        FACE_H as usize,
+    ))
+    .unwrap();
+    let t = r.prepare(&Look::default(), &state);
+    Sensor::default().clean(&r.render(&t, &[&CellLight::uniform(16, 32, monitor)])[0])
+}
+
+#[test]
+fn a_static_scene_reuses_the_relighting_and_keeps_the_state_right() {
+    let still = face_rgb();
+    let moved = render(
+        State {
+            pose: Pose {
+                yaw: 0.2,
+                ..Pose::default()
+            },
+            ..State::default()
+        },
+        Vec3::new(1.0, 1.0, 1.0),
+    );
+    let run = |skip: bool| {
+        let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", skip));
+        let outs: Vec<RgbImage> = (0..6).map(|i| push(&mut h, &c, still, i)).collect();
+        let after = push(&mut h, &c, &moved, 6);
+        (e, outs, after)
+    };
+    let (skipping, outs_skip, after_skip) = run(true);
+    let (computing, outs_full, after_full) = run(false);
+    assert_eq!(
+        stat(&skipping, "skipped-static"),
+        5,
+        "five repeats of the first frame are reused"
+    );
+    assert_eq!(stat(&skipping, "relit"), 2);
+    assert_eq!(
+        stat(&computing, "skipped-static"),
+        0,
+        "skip-static=false always runs the network"
+    );
+    // The same frame, reused or recomputed: the same picture within a level.
+    for (a, b) in outs_skip.iter().zip(&outs_full) {
+        assert!(mean_abs_diff(a, b) < 0.5);
+    }
+    // The smoothing state advanced across the skipped frames as if they had run.
+    assert!(
+        mean_abs_diff(&after_skip, &after_full) < 0.1,
+        "the first changed frame after a static stretch: {}",
+        mean_abs_diff(&after_skip, &after_full)
+    );
+}
+
+#[test]
+fn source_equal_to_target_passes_the_frame_through() {
+    let white = target("studio");
+    let (e, mut h, c) = harness_with(|e| e.set_property("target-location", &white));
+    let mut mh = Harness::with_element(&e, Some("monitor_sink"), None);
+    let shown = deskstage::io::read_png(std::path::Path::new(&white)).unwrap();
+    mh.set_src_caps(rgb_caps(shown.width as u32, shown.height as u32, 30));
+    let b = |i: u64| {
+        buffer(
+            &shown,
+            &rgb_caps(shown.width as u32, shown.height as u32, 30),
+            frame_time(i),
+            FRAME,
+        )
+    };
+    mh.push(b(0)).unwrap();
+    mh.push(b(1)).unwrap();
+    h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+        .unwrap();
+    let out = to_rgb(&h.pull().unwrap(), &c);
+    assert_eq!(stat(&e, "skipped-same-light"), 1);
+    assert_eq!(
+        out,
+        to_rgb(&buffer(face_rgb(), &c, frame_time(0), FRAME), &c),
+        "passed through untouched"
+    );
+
+    let (e2, mut h2, c2) = harness_with(|e| {
+        e.set_property("target-location", &white);
+        e.set_property("skip-same-light", false);
+    });
+    let mut mh2 = Harness::with_element(&e2, Some("monitor_sink"), None);
+    mh2.set_src_caps(rgb_caps(shown.width as u32, shown.height as u32, 30));
+    mh2.push(b(0)).unwrap();
+    mh2.push(b(1)).unwrap();
+    h2.push(buffer(face_rgb(), &c2, frame_time(0), FRAME))
+        .unwrap();
+    h2.pull().unwrap();
+    assert_eq!(stat(&e2, "skipped-same-light"), 0);
+    assert_eq!(stat(&e2, "relit"), 1);
+}
+
+#[test]
+fn nobody_there_means_no_inference_and_a_fresh_start() {
+    let away = render(
+        State {
+            pose: Pose {
+                present: false,
+                ..Pose::default()
+            },
+            ..State::default()
+        },
+        Vec3::new(1.0, 1.0, 1.0),
+    );
+    let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
+    push(&mut h, &c, face_rgb(), 0);
+    push(&mut h, &c, face_rgb(), 1);
+    for i in 2..5 {
+        let out = push(&mut h, &c, &away, i);
+        assert_eq!(
+            out,
+            to_rgb(&buffer(&away, &c, frame_time(i), FRAME), &c),
+            "the empty desk passes through"
+        );
+    }
+    assert_eq!(stat(&e, "skipped-absent"), 3);
+    assert_eq!(stat(&e, "relit"), 2);
+    // Back: relit as a first frame would be, with no state from before the absence.
+    let back = push(&mut h, &c, face_rgb(), 5);
+    let (_, mut fresh, fc) = harness_with(|_| {});
+    let first = push(&mut fresh, &fc, face_rgb(), 0);
+    assert!(mean_abs_diff(&back, &first) < 0.05);
+
+    let (e2, mut h2, c2) = harness_with(|e| e.set_property("skip-absent", false));
+    push(&mut h2, &c2, &away, 0);
+    assert_eq!(stat(&e2, "skipped-absent"), 0);
+    assert_eq!(stat(&e2, "relit"), 1);
+}
+
+#[test]
+fn late_frames_reuse_the_relighting_and_say_so() {
+    let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
+    let bus = gst::Bus::new();
+    e.set_bus(Some(&bus));
+    push(&mut h, &c, face_rgb(), 0);
+    // Downstream reports being a second behind: frames before then are too late to matter.
+    let qos = gst::event::Qos::new(
+        gst::QOSType::Underflow,
+        0.5,
+        1_000_000_000,
+        Some(frame_time(1)),
+    );
+    assert!(h.push_upstream_event(qos));
+    let dim = render(State::default(), Vec3::new(0.3, 0.3, 0.3));
+    for i in 1..4 {
+        push(&mut h, &c, &dim, i);
+    }
+    assert_eq!(
+        stat(&e, "qos-reused"),
+        3,
+        "late frames reuse the last relighting"
+    );
+    assert_eq!(stat(&e, "relit"), 1);
+    let qos_messages = std::iter::from_fn(|| bus.pop_filtered(&[gst::MessageType::Qos])).count();
+    assert_eq!(
+        qos_messages, 3,
+        "each is reported as GStreamer elements report QoS"
+    );
+
+    let (e2, mut h2, c2) = harness_with(|e| {
+        e.set_property("skip-static", false);
+        e.set_property("qos", false);
+    });
+    push(&mut h2, &c2, face_rgb(), 0);
+    h2.push_upstream_event(gst::event::Qos::new(
+        gst::QOSType::Underflow,
+        0.5,
+        1_000_000_000,
+        Some(frame_time(1)),
+    ));
+    push(&mut h2, &c2, &dim, 1);
+    assert_eq!(stat(&e2, "qos-reused"), 0);
+    assert_eq!(stat(&e2, "relit"), 2);
+}
+
+#[test]
+fn only_the_face_region_is_touched() {
+    let (w, ht) = (640u32, 480u32);
+    let img = {
+        let r = Renderer::new(Scene::new(Subject::default(), w as usize, ht as usize)).unwrap();
+        let t = r.prepare(&Look::default(), &State::default());
+        Sensor::default()
+            .clean(&r.render(&t, &[&CellLight::uniform(16, 32, Vec3::new(1.0, 1.0, 1.0))])[0])
+    };
+    for format in [gst_video::VideoFormat::I420, gst_video::VideoFormat::Bgrx] {
+        let e = element();
+        e.set_property("crop-size", 0.5f64);
+        e.set_property("target-location", target("left-key"));
+        let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+        let c = caps(format, w, ht, 30);
+        h.set_src_caps(c.clone());
+        let input = buffer(&img, &c, gst::ClockTime::ZERO, FRAME);
+        h.push(input.clone()).unwrap();
+        let out = h.pull().unwrap();
+        // The crop is the centred 240 x 240 square; everything else is byte for byte the input.
+        let (a, b) = (input.map_readable().unwrap(), out.map_readable().unwrap());
+        let info = gst_video::VideoInfo::from_caps(&c).unwrap();
+        let (x0, y0, size) = (200usize, 120usize, 240usize);
+        let stride = info.stride()[0] as usize;
+        let bpp = if format == gst_video::VideoFormat::I420 {
+            1
+        } else {
+            4
+        };
+        let mut inside_changed = 0;
+        for y in 0..ht as usize {
+            for x in 0..w as usize {
+                let i = y * stride + x * bpp;
+                let inside = (x0..x0 + size).contains(&x) && (y0..y0 + size).contains(&y);
+                if inside {
+                    inside_changed += (a[i] != b[i]) as usize;
+                } else {
+                    assert_eq!(
+                        a[i], b[i],
+                        "{format:?}: pixel ({x}, {y}) outside the face region changed"
+                    );
+                }
+            }
+        }
+        assert!(
+            inside_changed > 1000,
+            "{format:?}: the face region is relit"
+        );
+    }
+}
