@@ -175,3 +175,28 @@ fn nan_from_the_model_is_never_shown() {
         "relighting recovers at once"
     );
 }
+
+#[test]
+fn gaps_pass_through_as_gaps() {
+    let (e, mut h) = harness();
+    let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 30);
+    h.set_src_caps(c.clone());
+    h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+        .unwrap();
+    h.pull().unwrap();
+    assert!(
+        h.push_event(
+            gst::event::Gap::builder(frame_time(1))
+                .duration(FRAME)
+                .build()
+        )
+    );
+    h.push(buffer(face_rgb(), &c, frame_time(2), FRAME))
+        .unwrap();
+    // The next frame comes out (the aggregator's thread has then passed the gap) ...
+    assert_eq!(h.pull().unwrap().pts(), Some(frame_time(2)));
+    // ... and downstream saw the gap as a gap.
+    let gap = std::iter::from_fn(|| h.try_pull_event()).find(|e| e.type_() == gst::EventType::Gap);
+    assert!(gap.is_some(), "the gap reaches downstream");
+    assert_eq!(stat(&e, "relit"), 2);
+}

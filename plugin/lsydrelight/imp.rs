@@ -546,6 +546,11 @@ fn load_target(path: &std::path::Path) -> Result<Light, String> {
     Ok(Light::from_frame(&Frame::packed_rgb(&rgb, w, h)))
 }
 
+/// A buffer the aggregator made from a GAP event: no picture, only time.
+fn is_gap(buffer: &gst::BufferRef) -> bool {
+    buffer.flags().contains(gst::BufferFlags::GAP) && buffer.size() == 0
+}
+
 fn running_time(
     pad: &gst_base::AggregatorPad,
     pts: Option<gst::ClockTime>,
@@ -597,6 +602,10 @@ impl LsydRelight {
         }
         let end = loop {
             match pad.peek_buffer() {
+                Some(buffer) if is_gap(&buffer) => {
+                    // A gap in the screen capture shows nothing new.
+                    pad.drop_buffer();
+                }
                 Some(buffer) => {
                     let rt = running_time(pad, buffer.pts()).map(|t| t.nseconds() as i64);
                     // Monitor frames without a timestamp are taken as shown now.
@@ -1729,6 +1738,15 @@ impl AggregatorImpl for LsydRelight {
             }
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
         };
+        if is_gap(&face) {
+            // Nothing to relight: the gap goes on downstream, as a gap.
+            self.face_pad.drop_buffer();
+            let gap = gst::event::Gap::builder(face.pts().unwrap_or(gst::ClockTime::ZERO))
+                .duration(face.duration())
+                .build();
+            self.obj().src_pad().push_event(gap);
+            return Ok(gst::FlowSuccess::Ok);
+        }
         let s = self.settings();
         let face_rt = running_time(&self.face_pad, face.pts());
         let decision = match self.monitor_pad() {
