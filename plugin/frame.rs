@@ -18,6 +18,7 @@
 pub enum PixelFormat {
     I420,
     Nv12,
+    Y444,
     Rgba,
     Bgra,
     Rgbx,
@@ -34,14 +35,38 @@ impl PixelFormat {
             PixelFormat::Bgra | PixelFormat::Bgrx => Some(([2, 1, 0], 4)),
             PixelFormat::Rgb => Some(([0, 1, 2], 3)),
             PixelFormat::Bgr => Some(([2, 1, 0], 3)),
-            PixelFormat::I420 | PixelFormat::Nv12 => None,
+            PixelFormat::I420 | PixelFormat::Nv12 | PixelFormat::Y444 => None,
         }
+    }
+
+    /// For YUV formats: how many frame pixels one chroma sample covers in each
+    /// direction, and where Cb and Cr are.
+    fn chroma(self) -> Option<(usize, [ChromaPlace; 2])> {
+        match self {
+            PixelFormat::I420 => Some((2, [(1, 0, 1), (2, 0, 1)])),
+            PixelFormat::Nv12 => Some((2, [(1, 0, 2), (1, 1, 2)])),
+            PixelFormat::Y444 => Some((1, [(1, 0, 1), (2, 0, 1)])),
+            _ => None,
+        }
+    }
+
+    /// Cb and Cr of frame pixel (x, y) of a YUV frame.
+    pub(crate) fn chroma_at(self, planes: &[Plane; 3], x: usize, y: usize) -> (u8, u8) {
+        let (sub, places) = self.chroma().expect("a YUV format");
+        let at = |(plane, offset, step): ChromaPlace| {
+            let p = &planes[plane];
+            p.data[(y / sub) * p.stride + (x / sub) * step + offset]
+        };
+        (at(places[0]), at(places[1]))
     }
 
     pub fn is_yuv(self) -> bool {
         self.packed().is_none()
     }
 }
+
+/// Where a chroma channel is: plane, byte offset, bytes between samples.
+type ChromaPlace = (usize, usize, usize);
 
 /// The Y'CbCr matrix and range of a YUV stream.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -262,7 +287,8 @@ pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
         None => {
             // Average Y, Cb and Cr over each output pixel, then convert: the
             // conversion is affine, so this equals averaging RGB.
-            let wc = AreaWeights::new(crop.size / 2, res);
+            let (sub, places) = frame.format.chroma().expect("a YUV format");
+            let wc = AreaWeights::new(crop.size / sub, res);
             let mut yuv = vec![0f32; 3 * n];
             resample_channel(
                 &frame.planes[0],
@@ -274,16 +300,10 @@ pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
                 &w,
                 &mut yuv[..n],
             );
-            let (cx, cy) = (crop.x / 2, crop.y / 2);
-            match frame.format {
-                PixelFormat::I420 => {
-                    resample_channel(&frame.planes[1], 0, 1, cx, cy, &wc, &wc, &mut yuv[n..2 * n]);
-                    resample_channel(&frame.planes[2], 0, 1, cx, cy, &wc, &wc, &mut yuv[2 * n..]);
-                }
-                _ => {
-                    resample_channel(&frame.planes[1], 0, 2, cx, cy, &wc, &wc, &mut yuv[n..2 * n]);
-                    resample_channel(&frame.planes[1], 1, 2, cx, cy, &wc, &wc, &mut yuv[2 * n..]);
-                }
+            let (cx, cy) = (crop.x / sub, crop.y / sub);
+            for (k, (plane, offset, step)) in places.into_iter().enumerate() {
+                let out = &mut yuv[(k + 1) * n..(k + 2) * n];
+                resample_channel(&frame.planes[plane], offset, step, cx, cy, &wc, &wc, out);
             }
             for i in 0..n {
                 let rgb = frame.matrix.to_rgb(yuv[i], yuv[n + i], yuv[2 * n + i]);
@@ -369,16 +389,11 @@ impl LightingChange {
             None => {
                 let (y, ys) = (&mut *frame.planes[0].0, frame.planes[0].1);
                 self.apply_channel(y, ys, 0, 1, crop.x, crop.y, crop.size, 0, &fade, 1);
-                let (cx, cy, cs) = (crop.x / 2, crop.y / 2, crop.size / 2);
-                if frame.format == PixelFormat::I420 {
-                    let (u, us) = (&mut *frame.planes[1].0, frame.planes[1].1);
-                    self.apply_channel(u, us, 0, 1, cx, cy, cs, 1, &fade, 2);
-                    let (v, vs) = (&mut *frame.planes[2].0, frame.planes[2].1);
-                    self.apply_channel(v, vs, 0, 1, cx, cy, cs, 2, &fade, 2);
-                } else {
-                    let (uv, s) = (&mut *frame.planes[1].0, frame.planes[1].1);
-                    self.apply_channel(uv, s, 0, 2, cx, cy, cs, 1, &fade, 2);
-                    self.apply_channel(uv, s, 1, 2, cx, cy, cs, 2, &fade, 2);
+                let (sub, places) = frame.format.chroma().expect("a YUV format");
+                let (cx, cy, cs) = (crop.x / sub, crop.y / sub, crop.size / sub);
+                for (k, (plane, offset, step)) in places.into_iter().enumerate() {
+                    let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
+                    self.apply_channel(data, stride, offset, step, cx, cy, cs, k + 1, &fade, sub);
                 }
             }
         }

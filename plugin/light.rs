@@ -112,19 +112,10 @@ fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
     let fine = |v: f32| t.fine[(v.clamp(0.0, 1.0) * DECODE_STEPS as f32).round() as usize];
     let p0 = &frame.planes[0];
     match frame.format {
-        PixelFormat::I420 | PixelFormat::Nv12 => {
+        PixelFormat::I420 | PixelFormat::Nv12 | PixelFormat::Y444 => {
             let yrow = &p0.data[y * p0.stride..];
-            let (p1, p2) = (&frame.planes[1], &frame.planes[2]);
             for (x, o) in out.iter_mut().enumerate() {
-                let (cb, cr) = if frame.format == PixelFormat::I420 {
-                    (
-                        p1.data[(y / 2) * p1.stride + x / 2],
-                        p2.data[(y / 2) * p2.stride + x / 2],
-                    )
-                } else {
-                    let i = (y / 2) * p1.stride + (x / 2) * 2;
-                    (p1.data[i], p1.data[i + 1])
-                };
+                let (cb, cr) = frame.format.chroma_at(&frame.planes, x, y);
                 let rgb = frame.matrix.to_rgb(yrow[x] as f32, cb as f32, cr as f32);
                 *o = rgb.map(fine);
             }

@@ -39,9 +39,10 @@ static CAT: LazyLock<gst::DebugCategory> = LazyLock::new(|| {
     )
 });
 
-const FORMATS: [VideoFormat; 8] = [
+const FORMATS: [VideoFormat; 9] = [
     VideoFormat::I420,
     VideoFormat::Nv12,
+    VideoFormat::Y444,
     VideoFormat::Rgba,
     VideoFormat::Bgra,
     VideoFormat::Rgbx,
@@ -407,6 +408,7 @@ fn pixel_format(f: VideoFormat) -> Option<PixelFormat> {
     Some(match f {
         VideoFormat::I420 => PixelFormat::I420,
         VideoFormat::Nv12 => PixelFormat::Nv12,
+        VideoFormat::Y444 => PixelFormat::Y444,
         VideoFormat::Rgba => PixelFormat::Rgba,
         VideoFormat::Bgra => PixelFormat::Bgra,
         VideoFormat::Rgbx => PixelFormat::Rgbx,

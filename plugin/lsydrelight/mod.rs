@@ -5,7 +5,7 @@
 //! At-Home Light Stage", Choi, Christman, Sengupta, ECCV 2024).
 //!
 //! Pads:
-//! - `sink`: the face video (I420, NV12, RGBA, BGRA, RGBx, BGRx, RGB, BGR; any size and rate).
+//! - `sink`: the face video (I420, NV12, Y444, RGBA, BGRA, RGBx, BGRx, RGB, BGR; any size and rate).
 //! - `monitor_sink` (request): what the monitor showed, e.g. a screen capture, any size and rate.
 //!   Each face frame uses the monitor frame shown at its running time minus `monitor-offset`.
 //!   Without this pad, or while the monitor stream is stalled or over, the source light is

@@ -20,9 +20,10 @@ pub mod common;
 #[allow(unused_imports)]
 pub use common::{checkout, default_model, init};
 
-pub const FORMATS: [gst_video::VideoFormat; 8] = [
+pub const FORMATS: [gst_video::VideoFormat; 9] = [
     gst_video::VideoFormat::I420,
     gst_video::VideoFormat::Nv12,
+    gst_video::VideoFormat::Y444,
     gst_video::VideoFormat::Rgba,
     gst_video::VideoFormat::Bgra,
     gst_video::VideoFormat::Rgbx,
