@@ -29,7 +29,7 @@ pub enum PixelFormat {
 
 impl PixelFormat {
     /// Byte offsets of R, G and B and bytes per pixel, for packed RGB formats.
-    fn packed(self) -> Option<([usize; 3], usize)> {
+    pub(crate) fn packed(self) -> Option<([usize; 3], usize)> {
         match self {
             PixelFormat::Rgba | PixelFormat::Rgbx => Some(([0, 1, 2], 4)),
             PixelFormat::Bgra | PixelFormat::Bgrx => Some(([2, 1, 0], 4)),
@@ -179,8 +179,9 @@ impl Crop {
     /// even so chroma planes align.
     pub fn centred(width: usize, height: usize, cx: f64, cy: f64, size_fraction: f64) -> Crop {
         let short = width.min(height);
-        let size =
-            ((short as f64 * size_fraction.clamp(0.05, 1.0)).round() as usize).clamp(2, short) & !1;
+        let size = ((short as f64 * size_fraction.clamp(0.05, 1.0)).round() as usize)
+            .clamp(2.min(short), short)
+            & !1;
         let place = |centre: f64, extent: usize| {
             let x = (centre * extent as f64 - size as f64 / 2.0)
                 .round()

@@ -57,13 +57,12 @@ impl Light {
         let t = decode_tables();
         let wx = AreaWeights::new(frame.width, LIGHT_COLS);
         let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
-        // Which output column each input column feeds, with which weight (at most two).
-        let mut col_taps: Vec<[(usize, f32); 2]> = vec![[(0, 0.0); 2]; frame.width];
+        // Which output columns each input column feeds, with which weights: at most
+        // two for frames wider than the light, more for narrower ones.
+        let mut col_taps: Vec<Vec<(usize, f32)>> = vec![Vec::new(); frame.width];
         for (o, (s, w)) in wx.start.iter().zip(&wx.weights).enumerate() {
             for (k, wk) in w.iter().enumerate() {
-                let slot = &mut col_taps[s + k];
-                let i = if slot[0].1 == 0.0 { 0 } else { 1 };
-                slot[i] = (o, *wk);
+                col_taps[s + k].push((o, *wk));
             }
         }
         let mut rows = vec![[0f32; 3 * LIGHT_COLS]; frame.height];
@@ -121,12 +120,7 @@ fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
             }
         }
         format => {
-            let (offsets, bpp) = match format {
-                PixelFormat::Rgba | PixelFormat::Rgbx => ([0, 1, 2], 4),
-                PixelFormat::Bgra | PixelFormat::Bgrx => ([2, 1, 0], 4),
-                PixelFormat::Rgb => ([0, 1, 2], 3),
-                _ => ([2, 1, 0], 3),
-            };
+            let (offsets, bpp) = format.packed().expect("a packed RGB format");
             let row = &p0.data[y * p0.stride..];
             for (x, o) in out.iter_mut().enumerate() {
                 *o = offsets.map(|off| t.bytes[row[x * bpp + off] as usize]);
@@ -159,6 +153,19 @@ mod tests {
         let red = |r: usize, c: usize| l.0[r * LIGHT_COLS + c];
         assert!((red(0, 0) - 1.0).abs() < 1e-5);
         assert!(red(LIGHT_ROWS - 1, LIGHT_COLS - 1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn frames_narrower_than_the_light_fill_every_cell() {
+        // A 1x1 white frame and a 3x2 one: every cell sees the pixel it lies in.
+        let l = Light::from_frame(&Frame::packed_rgb(&[255, 255, 255], 1, 1));
+        assert!(l.0.iter().all(|v| (v - 1.0).abs() < 1e-5));
+        let mut data = vec![0u8; 3 * 2 * 3];
+        data[2 * 3] = 255; // top-right pixel red
+        let l = Light::from_frame(&Frame::packed_rgb(&data, 3, 2));
+        let red = |r: usize, c: usize| l.0[r * LIGHT_COLS + c];
+        assert!((red(0, LIGHT_COLS - 1) - 1.0).abs() < 1e-5);
+        assert!(red(0, 0).abs() < 1e-6 && red(LIGHT_ROWS - 1, LIGHT_COLS - 1).abs() < 1e-6);
     }
 
     #[test]

@@ -30,7 +30,6 @@ train t-lcfn --steps $steps
 train p-r96 --steps $steps --resolution 96
 train p-r160 --steps $steps --resolution 160
 train p-w0125 --steps $steps --width 0.125
-train p-w05 --steps $steps --width 0.5
 # Baselines and ablations (Tables 1-3).
 train t-sun --steps $steps --arch sun
 train t-sengupta --steps $steps --arch sengupta

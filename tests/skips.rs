@@ -108,6 +108,22 @@ fn source_equal_to_target_passes_the_frame_through() {
         "passed through untouched"
     );
 
+    // Without a monitor stream the source light is predicted from each frame, so it
+    // can never be taken as the target's: every frame runs the network.
+    let (e3, mut h3, c3) = harness_with(|e| {
+        e.set_property("target-location", &white);
+        e.set_property("same-light-tolerance", 1.0f64);
+        // The same frame three times is a static scene; that skip is not under test.
+        e.set_property("skip-static", false);
+    });
+    for i in 0..3 {
+        h3.push(buffer(face_rgb(), &c3, frame_time(i), FRAME))
+            .unwrap();
+        h3.pull().unwrap();
+    }
+    assert_eq!(stat(&e3, "skipped-same-light"), 0);
+    assert_eq!(stat(&e3, "relit"), 3);
+
     let (e2, mut h2, c2) = harness_with(|e| {
         e.set_property("target-location", &white);
         e.set_property("skip-same-light", false);
@@ -136,6 +152,7 @@ fn nobody_there_means_no_inference_and_a_fresh_start() {
         Vec3::new(1.0, 1.0, 1.0),
     );
     let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
+    let mut side = Harness::with_element(&e, None, Some("monitor_src"));
     push(&mut h, &c, face_rgb(), 0);
     push(&mut h, &c, face_rgb(), 1);
     for i in 2..5 {
@@ -148,6 +165,19 @@ fn nobody_there_means_no_inference_and_a_fresh_start() {
     }
     assert_eq!(stat(&e, "skipped-absent"), 3);
     assert_eq!(stat(&e, "relit"), 2);
+    // The predicted monitor keeps time: a picture for each relit frame, a gap for each
+    // frame with nobody there.
+    for i in 0..2 {
+        assert_eq!(side.pull().unwrap().pts(), Some(frame_time(i)));
+    }
+    let mut gaps = Vec::new();
+    while gaps.len() < 3 {
+        let event = side.pull_event().expect("the gaps reach monitor_src");
+        if let gst::EventView::Gap(g) = event.view() {
+            gaps.push(g.get().0);
+        }
+    }
+    assert_eq!(gaps, (2..5).map(frame_time).collect::<Vec<_>>());
     // Back: relit as a first frame would be, with no state from before the absence.
     let back = push(&mut h, &c, face_rgb(), 5);
     let (_, mut fresh, fc) = harness_with(|_| {});

@@ -52,11 +52,18 @@ pub struct Score {
     /// Adjacent-frame RMSE of the output, and of the change against the ground truth's change.
     pub adjacent_rmse: f64,
     pub change_rmse: f64,
+    /// Share of adjacent frame pairs whose RMSE exceeds each of `ADJACENT_THRESHOLDS`
+    /// (the paper's error rates).
+    pub adjacent_over: Vec<f64>,
     /// Per-frame processing time of the pipeline, wall clock.
     pub ms_per_frame: f64,
     /// The element's `stats` at the end.
     pub stats: serde_json::Value,
 }
+
+/// Thresholds of the adjacent-frame error rates, RMSE on 0-255: the same as
+/// `train/lsyd/metrics.py`'s `TEMPORAL_THRESHOLDS`.
+pub const ADJACENT_THRESHOLDS: [f64; 3] = [2.0, 4.0, 8.0];
 
 /// A structure of numbers as JSON.
 pub fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
@@ -155,7 +162,8 @@ pub fn score_recording(
     let (mut region_err, mut region_n, mut frame_err, mut frame_n, mut in_err) =
         (0.0, 0, 0.0, 0, 0.0);
     let mut previous: Option<(RgbImage, RgbImage)> = None;
-    let (mut adj, mut change) = (0.0, 0.0);
+    let mut adjacent = Vec::new();
+    let mut change = 0.0;
     let started = Instant::now();
     let result = loop {
         let Some(sample) = sink.try_pull_sample(gst::ClockTime::from_seconds(120)) else {
@@ -191,7 +199,7 @@ pub fn score_recording(
                 a += d_out * d_out;
                 c += (d_out - d_gt) * (d_out - d_gt);
             }
-            adj += (a / out.data.len() as f64).sqrt();
+            adjacent.push((a / out.data.len() as f64).sqrt());
             change += (c / out.data.len() as f64).sqrt();
         }
         previous = Some((out, gt));
@@ -217,7 +225,11 @@ pub fn score_recording(
     score.rmse_region = (region_err / region_n as f64).sqrt();
     score.input_rmse_region = (in_err / region_n as f64).sqrt();
     score.rmse_frame = (frame_err / frame_n as f64).sqrt();
-    score.adjacent_rmse = adj / (score.frames - 1).max(1) as f64;
+    score.adjacent_rmse = adjacent.iter().sum::<f64>() / adjacent.len().max(1) as f64;
+    score.adjacent_over = ADJACENT_THRESHOLDS
+        .iter()
+        .map(|t| adjacent.iter().filter(|a| *a > t).count() as f64 / adjacent.len().max(1) as f64)
+        .collect();
     score.change_rmse = change / (score.frames - 1).max(1) as f64;
     score.ms_per_frame = elapsed.as_secs_f64() * 1e3 / score.frames as f64;
     Ok(score)

@@ -14,6 +14,7 @@
 //! The target light's code is computed once per target, not per frame.
 
 use std::path::Path;
+use std::time::Instant;
 
 use ort::environment::Environment;
 use ort::session::Session;
@@ -64,17 +65,16 @@ pub struct FrameOutput {
     pub source: Light,
 }
 
-/// Counts of work done and skipped, for statistics.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+/// Work done, for statistics.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct EngineCounts {
-    /// Frames the network ran on.
-    pub frames: u64,
-    /// Frames whose relighting was reused (the network did not run).
-    pub skipped: u64,
     pub target_encodes: u64,
     pub predictions: u64,
-    pub presence_checks: u64,
     pub non_finite: u64,
+    /// Seconds inside ONNX Runtime, every stage.
+    pub network_seconds: f64,
+    /// Seconds spent averaging source lights and smoothing features.
+    pub filter_seconds: f64,
 }
 
 pub struct Relighter {
@@ -102,6 +102,14 @@ fn values(v: &DynValue) -> Result<&[f32], EngineError> {
     v.try_extract_tensor::<f32>()
         .map(|(_, d)| d)
         .map_err(inference)
+}
+
+/// Runs `body`, adding its wall time to `seconds`.
+fn timed<T>(seconds: &mut f64, body: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = body();
+    *seconds += start.elapsed().as_secs_f64();
+    out
 }
 
 fn light_of(v: &DynValue) -> Result<Light, EngineError> {
@@ -182,7 +190,6 @@ impl Relighter {
             self.averager.push(l);
         }
         self.smoother.repeat_last();
-        self.counts.skipped += 1;
     }
 
     /// Whether the model can tell if the person is in view.
@@ -196,10 +203,11 @@ impl Relighter {
         let Some(session) = self.sessions.presence.as_mut() else {
             return Ok(None);
         };
-        self.counts.presence_checks += 1;
-        let mut out = session
-            .run(ort::inputs!["image" => tensor([1, 3, PRESENCE_SIZE, PRESENCE_SIZE], image)?])
-            .map_err(inference)?;
+        let input = tensor([1, 3, PRESENCE_SIZE, PRESENCE_SIZE], image)?;
+        let mut out = timed(&mut self.counts.network_seconds, || {
+            session.run(ort::inputs!["image" => input])
+        })
+        .map_err(inference)?;
         let logit = values(&take(&mut out, "presence")?)?[0];
         Ok(Some(1.0 / (1.0 + (-logit).exp())))
     }
@@ -222,7 +230,8 @@ impl Relighter {
 
     /// The code of a light.
     pub fn encode_light(&mut self, light: &Light) -> Result<Vec<f32>, EngineError> {
-        encode(&mut self.sessions.light_encoder, light)
+        let session = &mut self.sessions.light_encoder;
+        timed(&mut self.counts.network_seconds, || encode(session, light))
     }
 
     /// Sets the target light; its code is computed here, once, and reused every frame.
@@ -234,10 +243,6 @@ impl Relighter {
         self.counts.target_encodes += 1;
         self.target = Some((light.clone(), code));
         Ok(())
-    }
-
-    pub fn has_target(&self) -> bool {
-        self.target.is_some()
     }
 
     /// Relights one frame: `image` is planar sRGB in [0, 1], 3 × R × R.
@@ -259,13 +264,11 @@ impl Relighter {
             Some((_, code)) => code.clone(),
             None => return Err(EngineError::Inference("no target light is set".into())),
         };
-        self.counts.frames += 1;
-
-        let mut enc = self
-            .sessions
-            .encoder
-            .run(ort::inputs!["image" => tensor([1, 3, r, r], image)?])
-            .map_err(inference)?;
+        let network = &mut self.counts.network_seconds;
+        let input = tensor([1, 3, r, r], image)?;
+        let encoder = &mut self.sessions.encoder;
+        let mut enc =
+            timed(network, || encoder.run(ort::inputs!["image" => input])).map_err(inference)?;
         let stem = take(&mut enc, "stem")?;
         let raw: Vec<DynValue> = RAW
             .iter()
@@ -275,11 +278,11 @@ impl Relighter {
 
         let predicted = if want_prediction || source == Source::Unknown {
             self.counts.predictions += 1;
-            let mut out = self
-                .sessions
-                .light_decoder
-                .run(ort::inputs!["e2" => &raw[1], "e4" => &raw[3], "e6" => &raw[5]])
-                .map_err(inference)?;
+            let decoder = &mut self.sessions.light_decoder;
+            let mut out = timed(network, || {
+                decoder.run(ort::inputs!["e2" => &raw[1], "e4" => &raw[3], "e6" => &raw[5]])
+            })
+            .map_err(inference)?;
             Some(light_of(&take(&mut out, "predicted_light")?)?)
         } else {
             None
@@ -288,19 +291,28 @@ impl Relighter {
             Source::Known(l) => l,
             Source::Unknown => predicted.clone().expect("predicted above"),
         };
+        if !this_source.is_finite() {
+            // A broken prediction must neither light this frame nor enter the average.
+            return Ok(self.non_finite(predicted, this_source));
+        }
         self.last_source = Some(this_source.clone());
-        let averaged = self.averager.push(this_source);
-        let source_code = encode(&mut self.sessions.light_encoder, &averaged)?;
+        let averaged = timed(&mut self.counts.filter_seconds, || {
+            self.averager.push(this_source)
+        });
+        let network = &mut self.counts.network_seconds;
+        let light_encoder = &mut self.sessions.light_encoder;
+        let source_code = timed(network, || encode(light_encoder, &averaged))?;
 
-        let mut delit_out = self
-            .sessions
-            .delight
-            .run(ort::inputs![
+        let source_code = tensor_code(&source_code)?;
+        let delight = &mut self.sessions.delight;
+        let mut delit_out = timed(network, || {
+            delight.run(ort::inputs![
                 "e1" => &raw[0], "e2" => &raw[1], "e3" => &raw[2], "e4" => &raw[3],
                 "e5" => &raw[4], "e6" => &raw[5], "e7" => &raw[6],
-                "source_code" => tensor_code(&source_code)?,
+                "source_code" => source_code,
             ])
-            .map_err(inference)?;
+        })
+        .map_err(inference)?;
         let mut delit: Vec<DynValue> = SMOOTHED
             .iter()
             .map(|n| take(&mut delit_out, n))
@@ -311,14 +323,8 @@ impl Relighter {
             .iter()
             .all(|v| values(v).is_ok_and(|d| d.iter().all(|x| x.is_finite())));
         if !finite {
-            // Keep NaN out of the smoothing state; start afresh next frame.
-            self.counts.non_finite += 1;
-            self.reset();
-            return Ok(FrameOutput {
-                relit: None,
-                predicted,
-                source: averaged,
-            });
+            // Keep NaN out of the smoothing state.
+            return Ok(self.non_finite(predicted, averaged));
         }
         {
             let mut slices: Vec<&mut [f32]> = delit
@@ -329,33 +335,45 @@ impl Relighter {
                         .map_err(inference)
                 })
                 .collect::<Result<_, _>>()?;
-            self.smoother.smooth(&mut slices);
+            let smoother = &mut self.smoother;
+            timed(&mut self.counts.filter_seconds, || {
+                smoother.smooth(&mut slices)
+            });
         }
 
-        let mut dec = self
-            .sessions
-            .decoder
-            .run(ort::inputs![
+        let target_code = tensor_code(&target_code)?;
+        let decoder = &mut self.sessions.decoder;
+        let mut dec = timed(&mut self.counts.network_seconds, || {
+            decoder.run(ort::inputs![
                 "f1" => &delit[0], "f2" => &delit[1], "f3" => &delit[2], "f4" => &delit[3],
                 "f5" => &delit[4], "f6" => &delit[5], "f7" => &delit[6],
                 "stem" => &stem,
-                "target_code" => tensor_code(&target_code)?,
+                "target_code" => target_code,
             ])
-            .map_err(inference)?;
+        })
+        .map_err(inference)?;
         let relit = values(&take(&mut dec, "relit")?)?.to_vec();
         drop(dec);
-        let relit = if relit.iter().all(|v| v.is_finite()) {
-            Some(relit)
-        } else {
-            self.counts.non_finite += 1;
-            self.reset();
-            None
-        };
+        if !relit.iter().all(|v| v.is_finite()) {
+            return Ok(self.non_finite(predicted, averaged));
+        }
         Ok(FrameOutput {
-            relit,
-            predicted,
+            relit: Some(relit),
+            predicted: predicted.filter(Light::is_finite),
             source: averaged,
         })
+    }
+
+    /// The output of a frame the model broke on (NaN or Inf): nothing relit, and
+    /// the temporal state starts afresh with the next frame.
+    fn non_finite(&mut self, predicted: Option<Light>, source: Light) -> FrameOutput {
+        self.counts.non_finite += 1;
+        self.reset();
+        FrameOutput {
+            relit: None,
+            predicted: predicted.filter(Light::is_finite),
+            source,
+        }
     }
 }
 

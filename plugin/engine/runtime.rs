@@ -107,11 +107,6 @@ pub fn environment(library: &Path) -> Result<&'static Environment, EngineError> 
     Ok(&loaded.environment)
 }
 
-/// The library this process loaded, if any.
-pub fn loaded_library() -> Option<&'static Path> {
-    ENVIRONMENT.get().map(|l| l.library.as_path())
-}
-
 /// The stage sessions of a model.
 pub struct Sessions {
     pub light_encoder: Session,

@@ -51,6 +51,8 @@ const FORMATS: [VideoFormat; 9] = [
     VideoFormat::Bgr,
 ];
 
+/// Smallest face frame: the crop and the lighting transfer need a few pixels to work with.
+const MIN_FACE_SIZE: i32 = 16;
 /// Size of the predicted-monitor video: each light cell becomes 8×8 pixels.
 const MONITOR_SCALE: usize = 8;
 /// Buffers `monitor_src` holds before it drops the oldest.
@@ -62,6 +64,7 @@ pub static MONITOR_TIMESTAMP_CAPS: LazyLock<gst::Caps> =
 
 const DEFAULT_THREADS: u32 = 2;
 const DEFAULT_MONITOR_OFFSET: i64 = 0;
+const MAX_MONITOR_OFFSET: i64 = 10_000_000_000;
 const DEFAULT_MONITOR_TIMEOUT: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
@@ -88,7 +91,10 @@ struct Settings {
     provider: ExecutionProvider,
     threads: u32,
     target_location: PathBuf,
-    /// Bumped whenever the target changes, so the streaming thread reloads it.
+    /// The target light, decoded when `target-location` is set (on the application's
+    /// thread, so a change never stalls the stream); None until then or if it failed.
+    target_light: Option<Arc<Light>>,
+    /// Bumped whenever the target light changes, so the streaming thread encodes it.
     target_generation: u64,
     monitor_offset: i64,
     monitor_timeout: gst::ClockTime,
@@ -116,6 +122,7 @@ impl Default for Settings {
             provider: ExecutionProvider::Cpu,
             threads: DEFAULT_THREADS,
             target_location: paths::default_target(),
+            target_light: None,
             target_generation: 0,
             monitor_offset: DEFAULT_MONITOR_OFFSET,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
@@ -145,6 +152,7 @@ enum Fallback {
     Stalled,
     Ended,
     NoTimestamp,
+    Unreadable,
 }
 
 impl Fallback {
@@ -155,6 +163,9 @@ impl Fallback {
             Fallback::Stalled => "the monitor stream has stalled",
             Fallback::Ended => "the monitor stream has ended",
             Fallback::NoTimestamp => "the face frame has no timestamp to align the monitor by",
+            Fallback::Unreadable => {
+                "the monitor frame cannot be read (its caps are missing or do not match it)"
+            }
         }
     }
 }
@@ -182,14 +193,18 @@ struct Shown {
 }
 
 impl Shown {
+    /// The frame's light, computed the first time a face frame needs it. None while
+    /// the frame cannot be read; it is kept, in case its caps arrive.
     fn light(&mut self, info: Option<&gst_video::VideoInfo>) -> Option<Light> {
         if self.light.is_none()
-            && let (Some(buffer), Some(info)) = (self.frame.take(), info)
-            && let Ok(frame) =
-                gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), info)
-            && let Some(view) = frame_view(&frame)
+            && let (Some(buffer), Some(info)) = (self.frame.as_ref(), info)
         {
-            self.light = Some(Light::from_frame(&view));
+            self.light = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), info)
+                .ok()
+                .and_then(|f| frame_view(&f).map(|view| Light::from_frame(&view)));
+            if self.light.is_some() {
+                self.frame = None;
+            }
         }
         self.light.clone()
     }
@@ -212,9 +227,14 @@ struct Stats {
     skipped_same_light: u64,
     skipped_static: u64,
     qos_reused: u64,
-    /// Seconds spent per frame in all, and in the network's stages.
+    /// Seconds spent on face frames in all, and on the parts outside the network:
+    /// reading the face region into the network's input (crop, colour conversion,
+    /// resampling) and putting the lighting change back into the frame.
     processing_seconds: f64,
-    network_seconds: f64,
+    crop_seconds: f64,
+    paste_seconds: f64,
+    /// Seconds spent turning monitor frames into lights.
+    monitor_light_seconds: f64,
     known_source: u64,
     predicted_source: u64,
     fallbacks: u64,
@@ -234,6 +254,8 @@ struct State {
     last_face_rt: Option<gst::ClockTime>,
     /// The last frame the network ran on, whose lighting change a skipped frame reuses.
     last: Option<Processed>,
+    /// A NaN warning was posted and no frame has been relit since.
+    nan_warned: bool,
 }
 
 /// What a frame the network ran on leaves for the frames that reuse it.
@@ -266,8 +288,8 @@ enum FramePath {
     SameLight,
     /// Apply the last frame's lighting change.
     Reuse(Reuse),
-    /// Run the network.
-    Full,
+    /// Run the network, with this averaged source light (None: to be predicted).
+    Full(Option<Light>),
 }
 
 enum Reuse {
@@ -380,6 +402,8 @@ pub struct LsydRelight {
     qos_earliest: Mutex<Option<gst::ClockTime>>,
     /// Whether upstream is live, from the latency query.
     live: std::sync::atomic::AtomicBool,
+    /// A warning about upstream's caps was posted (once per run).
+    caps_warned: std::sync::atomic::AtomicBool,
     monitor: Mutex<MonitorTrack>,
     face_stream_id: Mutex<Option<glib::GString>>,
 }
@@ -388,10 +412,34 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
     m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
+/// Face video: the formats above, at least `MIN_FACE_SIZE` on each side.
 fn video_caps() -> gst::Caps {
     gst_video::VideoCapsBuilder::new()
         .format_list(FORMATS)
+        .width_range(MIN_FACE_SIZE..)
+        .height_range(MIN_FACE_SIZE..)
         .build()
+}
+
+/// Monitor content: the same formats, any size.
+fn monitor_caps() -> gst::Caps {
+    gst_video::VideoCapsBuilder::new()
+        .format_list(FORMATS)
+        .build()
+}
+
+/// What a pad takes and how to give it that, for error messages.
+fn caps_advice(pad: &str) -> String {
+    let formats: Vec<&str> = FORMATS.iter().map(|f| f.to_str().as_str()).collect();
+    let size = if pad == "sink" {
+        format!(" of at least {MIN_FACE_SIZE}x{MIN_FACE_SIZE}")
+    } else {
+        String::new()
+    };
+    format!(
+        "{pad} takes raw video in {}{size}; put videoconvert (and videoscale) in front of it",
+        formats.join(", ")
+    )
 }
 
 fn monitor_src_caps(fps: gst::Fraction) -> gst::Caps {
@@ -563,7 +611,43 @@ fn running_time(
         .to_running_time(pts?)
 }
 
+/// One frame's duration at the caps' frame rate, if it has one.
+fn frame_duration(info: &gst_video::VideoInfo) -> Option<gst::ClockTime> {
+    let fps = info.fps();
+    (fps.numer() > 0).then(|| {
+        gst::ClockTime::SECOND
+            .mul_div_floor(fps.denom() as u64, fps.numer() as u64)
+            .unwrap_or(gst::ClockTime::ZERO)
+    })
+}
+
 impl LsydRelight {
+    /// Decodes a new target image here, on the caller's thread, so that changing the
+    /// target while playing never stalls a frame; the stream then only encodes it.
+    fn set_target_location(&self, path: PathBuf) {
+        let decoded = load_target(&path);
+        let running = lock(&self.state).is_some();
+        let mut s = lock(&self.settings);
+        s.target_location = path;
+        match decoded {
+            Ok(light) => {
+                s.target_light = Some(Arc::new(light));
+                s.target_generation += 1;
+            }
+            // Stopped, the error surfaces when the element starts.
+            Err(_) if !running => s.target_light = None,
+            Err(e) => {
+                drop(s);
+                gst::element_imp_warning!(
+                    self,
+                    gst::ResourceError::OpenRead,
+                    ("Keeping the previous target light: {}", e),
+                    ["Set target-location to a readable PNG image of monitor content."]
+                );
+            }
+        }
+    }
+
     fn settings(&self) -> Settings {
         lock(&self.settings).clone()
     }
@@ -572,18 +656,24 @@ impl LsydRelight {
         lock(&self.monitor_pad).clone()
     }
 
-    /// Forgets temporal state: after flushes, seeks, discontinuities, caps changes and gaps.
+    /// Updates the statistics. The lock is held only for `update`, never while
+    /// posting messages or running the network, so reading `stats` never waits long.
+    fn count(&self, update: impl FnOnce(&mut Stats)) {
+        update(&mut lock(&self.stats));
+    }
+
+    /// Forgets the face stream's temporal state: after flushes, seeks, discontinuities,
+    /// caps changes and gaps. The monitor frame on screen stays: it is still on screen.
     fn reset_state(&self, why: &str) {
         if let Some(s) = lock(&self.state).as_mut() {
             // Only a reset that forgets something counts.
             if s.relighter.has_history() {
-                lock(&self.stats).resets += 1;
+                self.count(|st| st.resets += 1);
             }
             s.relighter.reset();
             s.last_face_rt = None;
             s.last = None;
         }
-        lock(&self.monitor).current = None;
         gst::debug!(CAT, imp = self, "reset temporal state: {why}");
     }
 
@@ -629,7 +719,7 @@ impl LsydRelight {
                         frame: Some(buffer),
                         light: None,
                     });
-                    lock(&self.stats).monitor_frames += 1;
+                    self.count(|st| st.monitor_frames += 1);
                     pad.drop_buffer();
                 }
                 None if pad.is_eos() => break End::Ended,
@@ -640,13 +730,18 @@ impl LsydRelight {
         let track = &mut *track;
         let info = track.info.as_ref();
         let known = |c: &mut Shown| {
-            if c.light.is_none() {
-                lock(&self.stats).monitor_decoded += 1;
+            let decoding = c.light.is_none();
+            let started = std::time::Instant::now();
+            let light = c.light(info);
+            if decoding && light.is_some() {
+                self.count(|st| {
+                    st.monitor_decoded += 1;
+                    st.monitor_light_seconds += started.elapsed().as_secs_f64();
+                });
             }
-            match c.light(info) {
+            match light {
                 Some(l) => MonitorDecision::Known(l, c.at),
-                // A frame that cannot be read (no caps yet) cannot light anything.
-                None => MonitorDecision::Fallback(Fallback::NotStarted),
+                None => MonitorDecision::Fallback(Fallback::Unreadable),
             }
         };
         let Some(target) = target else {
@@ -675,7 +770,7 @@ impl LsydRelight {
         drop(track);
         match (previous, fallback) {
             (_, Some(f)) if f != Fallback::NoMonitorPad => {
-                lock(&self.stats).fallbacks += 1;
+                self.count(|st| st.fallbacks += 1);
                 gst::element_imp_warning!(
                     self,
                     gst::StreamError::Failed,
@@ -691,7 +786,7 @@ impl LsydRelight {
             (Some(_), None) => {
                 gst::element_imp_info!(
                     self,
-                    gst::CoreError::Failed,
+                    gst::StreamError::Failed,
                     ("The monitor stream is back: relighting with the monitor's light again")
                 );
             }
@@ -701,16 +796,16 @@ impl LsydRelight {
 
     /// Brings the temporal state and the target up to date for the next frame:
     /// resets after a break in the stream, new filter settings, a new target.
-    fn update_state(
-        &self,
-        state: &mut State,
-        stats: &mut Stats,
-        buffer: &gst::Buffer,
-        s: &Settings,
-    ) {
+    fn update_state(&self, state: &mut State, buffer: &gst::Buffer, s: &Settings) {
         let rt = running_time(&self.face_pad, buffer.pts());
+        // A slow stream (1 fps) is not a broken one: a gap counts only beyond a few frames.
+        let frame = buffer
+            .duration()
+            .or_else(|| state.face_info.as_ref().and_then(frame_duration))
+            .unwrap_or(gst::ClockTime::ZERO);
+        let gap_limit = s.reset_gap.max(3 * frame);
         let gap = match (state.last_face_rt, rt) {
-            (Some(a), Some(b)) => a.nseconds().abs_diff(b.nseconds()) > s.reset_gap.nseconds(),
+            (Some(a), Some(b)) => a.nseconds().abs_diff(b.nseconds()) > gap_limit.nseconds(),
             _ => false,
         };
         if (buffer.flags().contains(gst::BufferFlags::DISCONT) || gap)
@@ -718,7 +813,7 @@ impl LsydRelight {
         {
             state.relighter.reset();
             state.last = None;
-            stats.resets += 1;
+            self.count(|st| st.resets += 1);
             gst::debug!(CAT, imp = self, "reset temporal state at a discontinuity");
         }
         state.last_face_rt = rt.or(state.last_face_rt);
@@ -727,10 +822,10 @@ impl LsydRelight {
             state.temporal = s.temporal;
             state.last = None;
         }
-        if state.target_generation != s.target_generation {
-            match load_target(&s.target_location)
-                .and_then(|l| state.relighter.set_target(&l).map_err(|e| e.to_string()))
-            {
+        if state.target_generation != s.target_generation
+            && let Some(light) = &s.target_light
+        {
+            match state.relighter.set_target(light) {
                 Ok(()) => gst::info!(
                     CAT,
                     imp = self,
@@ -739,9 +834,11 @@ impl LsydRelight {
                 ),
                 Err(e) => gst::element_imp_warning!(
                     self,
-                    gst::ResourceError::OpenRead,
-                    ("Keeping the previous target light: {}", e),
-                    ["Set target-location to a readable PNG image of monitor content."]
+                    gst::LibraryError::Failed,
+                    (
+                        "Keeping the previous target light: cannot encode the new one: {}",
+                        e
+                    )
                 ),
             }
             state.target_generation = s.target_generation;
@@ -774,7 +871,10 @@ impl LsydRelight {
             }
         }
         let average = state.relighter.peek_average(source);
+        // Only a known source light can be compared: a predicted one comes from the
+        // frame, so it must be predicted afresh each time.
         if s.skip_same_light
+            && matches!(source, Source::Known(_))
             && let (Some(avg), Some(target)) = (&average, state.relighter.target())
             && avg.distance(target) <= s.same_light_tolerance as f32
         {
@@ -797,7 +897,7 @@ impl LsydRelight {
                 return Ok(FramePath::Reuse(Reuse::Static));
             }
         }
-        Ok(FramePath::Full)
+        Ok(FramePath::Full(average))
     }
 
     /// In a live pipeline: is a frame of this running time already past its deadline,
@@ -857,15 +957,20 @@ impl LsydRelight {
         s: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
         let started = std::time::Instant::now();
+        self.count(|st| {
+            st.frames += 1;
+            match &source {
+                Source::Known(_) => st.known_source += 1,
+                Source::Unknown => st.predicted_source += 1,
+            }
+        });
         let mut guard = lock(&self.state);
         let state = guard.as_mut().ok_or(gst::FlowError::Flushing)?;
         let info = state
             .face_info
             .clone()
             .ok_or(gst::FlowError::NotNegotiated)?;
-        let mut stats = lock(&self.stats);
-        stats.frames += 1;
-        self.update_state(state, &mut stats, &buffer, s);
+        self.update_state(state, &buffer, s);
 
         let (w, h) = (info.width() as usize, info.height() as usize);
         let crop = Crop::centred(w, h, s.crop_x, s.crop_y, s.crop_size);
@@ -874,7 +979,10 @@ impl LsydRelight {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
+            let cropping = std::time::Instant::now();
             let image = sample_crop(&view, crop, res);
+            let crop_seconds = cropping.elapsed().as_secs_f64();
+            self.count(|st| st.crop_seconds += crop_seconds);
             let input = FrameInput {
                 frame: &view,
                 crop,
@@ -885,60 +993,58 @@ impl LsydRelight {
             let path = self.choose_path(state, &input, s)?;
             (image, path)
         };
-        match &source {
-            Source::Known(_) => stats.known_source += 1,
-            Source::Unknown => stats.predicted_source += 1,
-        }
         let want_prediction = self.monitor_src.is_linked();
         let feather = (s.feather * crop.size as f64).round() as usize;
         let apply =
             |buffer: &mut gst::Buffer, change: &LightingChange| -> Result<(), gst::FlowError> {
+                let pasting = std::time::Instant::now();
                 let mut frame =
                     gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
                         .map_err(|_| gst::FlowError::Error)?;
                 with_frame_mut(&mut frame, |fm| change.apply(fm, crop, feather));
+                let paste_seconds = pasting.elapsed().as_secs_f64();
+                self.count(|st| st.paste_seconds += paste_seconds);
                 Ok(())
             };
+        let mut warn_nan = false;
         let predicted = match path {
             FramePath::Absent => {
                 // Nobody there: pass the frame through. The pose will have changed by
                 // the time the person is back, so their temporal state must not carry over.
-                stats.skipped_absent += 1;
+                self.count(|st| st.skipped_absent += 1);
                 state.relighter.reset();
                 state.last = None;
                 None
             }
             FramePath::SameLight => {
-                stats.skipped_same_light += 1;
+                self.count(|st| st.skipped_same_light += 1);
                 state.relighter.skip_frame(&source);
                 state.last.as_ref().and_then(|l| l.predicted.clone())
             }
             FramePath::Reuse(why) => {
-                match why {
-                    Reuse::Static => stats.skipped_static += 1,
-                    Reuse::Late => stats.qos_reused += 1,
-                }
+                self.count(|st| match why {
+                    Reuse::Static => st.skipped_static += 1,
+                    Reuse::Late => st.qos_reused += 1,
+                });
                 state.relighter.skip_frame(&source);
                 let last = state.last.as_ref().expect("reuse needs a processed frame");
                 apply(&mut buffer, &last.change)?;
                 last.predicted.clone()
             }
-            FramePath::Full => {
-                let average = state.relighter.peek_average(&source);
-                let network = std::time::Instant::now();
+            FramePath::Full(average) => {
                 let out: FrameOutput = state
                     .relighter
                     .process(&image, source, want_prediction)
                     .map_err(|e| self.engine_failed(e))?;
-                stats.network_seconds += network.elapsed().as_secs_f64();
-                match &out.relit {
+                match out.relit {
                     Some(relit) => {
                         let format =
                             pixel_format(info.format()).ok_or(gst::FlowError::NotNegotiated)?;
                         let change =
-                            LightingChange::new(&image, relit, res, format, yuv_matrix(&info));
+                            LightingChange::new(&image, &relit, res, format, yuv_matrix(&info));
                         apply(&mut buffer, &change)?;
-                        stats.relit += 1;
+                        self.count(|st| st.relit += 1);
+                        state.nan_warned = false;
                         state.last = Some(Processed {
                             image,
                             average: average.unwrap_or_else(|| out.source.clone()),
@@ -948,58 +1054,81 @@ impl LsydRelight {
                         });
                     }
                     None => {
-                        stats.passed_through += 1;
+                        self.count(|st| st.passed_through += 1);
                         state.last = None;
-                        gst::element_imp_warning!(
-                            self,
-                            gst::StreamError::Decode,
-                            ("The model produced NaN or Inf; passing this frame through unchanged"),
-                            [
-                                "The engine restarts its temporal state and relights the next frame afresh."
-                            ]
-                        );
+                        warn_nan = !std::mem::replace(&mut state.nan_warned, true);
                     }
                 }
                 out.predicted
             }
         };
         *lock(&self.engine_counts) = state.relighter.counts();
-        stats.processing_seconds += started.elapsed().as_secs_f64();
-        let pts = buffer.pts();
-        let duration = buffer.duration();
-        drop(stats);
         drop(guard);
-        if want_prediction && let Some(pred) = predicted {
-            self.push_monitor(&pred, pts, duration, info.fps());
+        if warn_nan {
+            gst::element_imp_warning!(
+                self,
+                gst::StreamError::Decode,
+                ("The model produced NaN or Inf; passing frames through unchanged until it recovers"),
+                ["The engine restarts its temporal state and relights the next frame afresh."]
+            );
+        }
+        let processing_seconds = started.elapsed().as_secs_f64();
+        self.count(|st| st.processing_seconds += processing_seconds);
+        if want_prediction {
+            self.push_monitor(
+                predicted.as_ref(),
+                buffer.pts(),
+                buffer.duration(),
+                info.fps(),
+            );
         }
         Ok(buffer)
     }
 
-    /// Queues the predicted light for `monitor_src`, with stream-start, caps and segment first.
+    /// Queues stream-start, caps and segment for `monitor_src`, once per stream.
+    fn start_side_stream(&self, fps: gst::Fraction) {
+        if self.side.lock().started {
+            return;
+        }
+        let id = lock(&self.face_stream_id)
+            .clone()
+            .map(|id| format!("{id}/monitor"))
+            .unwrap_or_else(|| "lsydrelight/monitor".into());
+        self.side
+            .push(SideItem::Event(gst::event::StreamStart::new(&id)));
+        self.side
+            .push(SideItem::Event(gst::event::Caps::new(&monitor_src_caps(
+                fps,
+            ))));
+        // Before the face stream's own segment (an empty stream), a time segment from 0.
+        let segment = match self.face_pad.segment() {
+            s if s.format() == gst::Format::Time => s,
+            _ => gst::FormattedSegment::<gst::ClockTime>::new().upcast(),
+        };
+        self.side
+            .push(SideItem::Event(gst::event::Segment::new(&segment)));
+        self.side.lock().started = true;
+    }
+
+    /// Queues what `monitor_src` shows for a face frame: the predicted light, or a gap
+    /// when there is none (nobody there, nothing to repeat, a broken prediction), so
+    /// the side stream keeps time with the face stream and never stalls its sink.
     fn push_monitor(
         &self,
-        light: &Light,
+        light: Option<&Light>,
         pts: Option<gst::ClockTime>,
         duration: Option<gst::ClockTime>,
         fps: gst::Fraction,
     ) {
-        let started = self.side.lock().started;
-        if !started {
-            let id = lock(&self.face_stream_id)
-                .clone()
-                .map(|id| format!("{id}/monitor"))
-                .unwrap_or_else(|| "lsydrelight/monitor".into());
-            self.side
-                .push(SideItem::Event(gst::event::StreamStart::new(&id)));
-            self.side
-                .push(SideItem::Event(gst::event::Caps::new(&monitor_src_caps(
-                    fps,
-                ))));
-            let segment = self.face_pad.segment();
-            self.side
-                .push(SideItem::Event(gst::event::Segment::new(&segment)));
-            self.side.lock().started = true;
-        }
+        self.start_side_stream(fps);
+        let Some(light) = light else {
+            if let Some(pts) = pts {
+                self.side.push(SideItem::Event(
+                    gst::event::Gap::builder(pts).duration(duration).build(),
+                ));
+            }
+            return;
+        };
         let mut buffer = gst::Buffer::from_mut_slice(monitor_image(light));
         {
             let b = buffer.get_mut().expect("new buffer");
@@ -1007,11 +1136,12 @@ impl LsydRelight {
             b.set_duration(duration);
         }
         let kept = self.side.push(SideItem::Buffer(buffer));
-        let mut stats = lock(&self.stats);
-        stats.monitor_out += 1;
-        if !kept {
-            stats.monitor_dropped += 1;
-        }
+        self.count(|st| {
+            st.monitor_out += 1;
+            if !kept {
+                st.monitor_dropped += 1;
+            }
+        });
     }
 
     fn monitor_src_activate(&self, pad: &gst::Pad, active: bool) -> Result<(), gst::LoggableError> {
@@ -1059,7 +1189,11 @@ impl LsydRelight {
             .field("skipped-static", s.skipped_static)
             .field("qos-reused", s.qos_reused)
             .field("processing-seconds", s.processing_seconds)
-            .field("network-seconds", s.network_seconds)
+            .field("network-seconds", c.network_seconds)
+            .field("crop-seconds", s.crop_seconds)
+            .field("paste-seconds", s.paste_seconds)
+            .field("smoothing-seconds", c.filter_seconds)
+            .field("monitor-light-seconds", s.monitor_light_seconds)
             .field("known-source", s.known_source)
             .field("predicted-source", s.predicted_source)
             .field("fallbacks", s.fallbacks)
@@ -1149,6 +1283,7 @@ impl ObjectSubclass for LsydRelight {
             engine_counts: Mutex::new(Default::default()),
             qos_earliest: Mutex::new(None),
             live: std::sync::atomic::AtomicBool::new(false),
+            caps_warned: std::sync::atomic::AtomicBool::new(false),
             monitor: Mutex::new(MonitorTrack::default()),
             face_stream_id: Mutex::new(None),
         }
@@ -1179,7 +1314,7 @@ impl ObjectImpl for LsydRelight {
                     .build(),
                 glib::ParamSpecUInt::builder("threads")
                     .nick("Threads")
-                    .blurb("CPU threads of each network stage")
+                    .blurb("CPU threads of each network stage (the small presence check always runs on one CPU thread)")
                     .minimum(1)
                     .maximum(64)
                     .default_value(DEFAULT_THREADS)
@@ -1193,7 +1328,9 @@ impl ObjectImpl for LsydRelight {
                     .build(),
                 glib::ParamSpecInt64::builder("monitor-offset")
                     .nick("Monitor offset")
-                    .blurb("Nanoseconds by which the monitor content that lit a face frame precedes it (display and camera latency)")
+                    .blurb("Nanoseconds by which the monitor content that lit a face frame precedes it (display and camera latency); a negative offset, for a screen capture that lags, adds as much latency")
+                    .minimum(-MAX_MONITOR_OFFSET)
+                    .maximum(MAX_MONITOR_OFFSET)
                     .default_value(DEFAULT_MONITOR_OFFSET)
                     .mutable_playing()
                     .build(),
@@ -1323,7 +1460,7 @@ impl ObjectImpl for LsydRelight {
                     .build(),
                 glib::ParamSpecBoxed::builder::<gst::Structure>("stats")
                     .nick("Statistics")
-                    .blurb("Frames processed, relit and passed through, source lights used, monitor fallbacks, resets, and work done")
+                    .blurb("Frames processed, relit, passed through and skipped (and why), source lights used, monitor fallbacks, resets, work done, and seconds spent: in all, in the network, cropping, pasting, smoothing and reading monitor frames")
                     .read_only()
                     .build(),
             ]
@@ -1332,20 +1469,27 @@ impl ObjectImpl for LsydRelight {
     }
 
     fn set_property(&self, _id: usize, value: &glib::Value, pspec: &glib::ParamSpec) {
-        let mut s = lock(&self.settings);
         let path = |v: &glib::Value| {
             PathBuf::from(v.get::<Option<String>>().ok().flatten().unwrap_or_default())
         };
+        match pspec.name() {
+            "target-location" => return self.set_target_location(path(value)),
+            "monitor-offset" => {
+                let offset: i64 = value.get().expect("type checked");
+                lock(&self.settings).monitor_offset = offset;
+                // A negative offset means waiting for monitor frames after the face frame.
+                self.obj()
+                    .set_latency(gst::ClockTime::from_nseconds((-offset).max(0) as u64), None);
+                return;
+            }
+            _ => {}
+        }
+        let mut s = lock(&self.settings);
         match pspec.name() {
             "model-location" => s.model_location = path(value),
             "ort-library" => s.ort_library = path(value),
             "execution-provider" => s.provider = value.get().expect("type checked"),
             "threads" => s.threads = value.get().expect("type checked"),
-            "target-location" => {
-                s.target_location = path(value);
-                s.target_generation += 1;
-            }
-            "monitor-offset" => s.monitor_offset = value.get().expect("type checked"),
             "monitor-timeout" => {
                 s.monitor_timeout =
                     gst::ClockTime::from_nseconds(value.get().expect("type checked"))
@@ -1452,7 +1596,7 @@ impl ElementImpl for LsydRelight {
                     "monitor_sink",
                     gst::PadDirection::Sink,
                     gst::PadPresence::Request,
-                    &caps,
+                    &monitor_caps(),
                     agg,
                 )
                 .expect("monitor_sink template"),
@@ -1529,12 +1673,15 @@ impl AggregatorImpl for LsydRelight {
             }
             _ => gst::error_msg!(gst::ResourceError::OpenRead, ["{}", e]),
         })?;
-        let target = load_target(&s.target_location).map_err(|e| {
-            gst::error_msg!(
-                gst::ResourceError::NotFound,
-                ["{}; set target-location to a PNG image of monitor content (shipped ones are in models/targets)", e]
-            )
-        })?;
+        let target = match &s.target_light {
+            Some(light) => Light::clone(light),
+            None => load_target(&s.target_location).map_err(|e| {
+                gst::error_msg!(
+                    gst::ResourceError::NotFound,
+                    ["{}; set target-location to a PNG image of monitor content (shipped ones are in models/targets)", e]
+                )
+            })?,
+        };
         relighter.set_target(&target).map_err(|e| {
             gst::error_msg!(
                 gst::LibraryError::Failed,
@@ -1557,6 +1704,7 @@ impl AggregatorImpl for LsydRelight {
             face_info: None,
             last_face_rt: None,
             last: None,
+            nan_warned: false,
         });
         *lock(&self.stats) = Stats::default();
         *lock(&self.engine_counts) = Default::default();
@@ -1571,6 +1719,8 @@ impl AggregatorImpl for LsydRelight {
 
     fn stop(&self) -> Result<(), gst::ErrorMessage> {
         *lock(&self.qos_earliest) = None;
+        self.caps_warned
+            .store(false, std::sync::atomic::Ordering::Relaxed);
         *lock(&self.state) = None;
         *lock(&self.monitor) = MonitorTrack::default();
         self.side.reset();
@@ -1612,8 +1762,9 @@ impl AggregatorImpl for LsydRelight {
                     Err(_) => {
                         gst::element_imp_error!(
                             self,
-                            gst::CoreError::Negotiation,
-                            ["unusable caps {}", c.caps()]
+                            gst::StreamError::Format,
+                            ("Cannot read the caps {}", c.caps()),
+                            ["{}", caps_advice(pad.name().as_str())]
                         );
                         return false;
                     }
@@ -1653,14 +1804,19 @@ impl AggregatorImpl for LsydRelight {
                 let _ = self.monitor_src.push_event(gst::event::FlushStart::new());
             }
             EventView::FlushStop(_) if is_face => {
+                // The task pauses itself when it sees the flush; holding its stream lock
+                // waits for that iteration to end, so the pause cannot land after the
+                // restart below, and no buffer from before the flush follows it.
+                self.side.set_flushing(true);
+                let _task = self.monitor_src.stream_lock();
                 let _ = self
                     .monitor_src
                     .push_event(gst::event::FlushStop::new(true));
-                self.side.set_flushing(false);
                 self.side.reset();
                 if self.monitor_src.is_active() {
                     let _ = self.monitor_src_activate(&self.monitor_src, true);
                 }
+                *lock(&self.qos_earliest) = None;
                 self.reset_state("flush");
             }
             EventView::FlushStop(_) => {
@@ -1672,14 +1828,31 @@ impl AggregatorImpl for LsydRelight {
     }
 
     fn sink_query(&self, pad: &gst_base::AggregatorPad, query: &mut gst::QueryRef) -> bool {
-        if pad != &self.face_pad {
-            return self.parent_sink_query(pad, query);
-        }
-        // The face and relit video have the same caps: ask downstream.
+        let is_face = pad == &self.face_pad;
+        let templ = if is_face {
+            video_caps()
+        } else {
+            monitor_caps()
+        };
         match query.view_mut() {
-            gst::QueryViewMut::Caps(q) => {
-                let templ = video_caps();
+            // The face and relit video have the same caps: ask downstream.
+            gst::QueryViewMut::Caps(q) if is_face => {
                 let downstream = self.obj().src_pad().peer_query_caps(Some(&templ));
+                if let Some(f) = q.filter()
+                    && !f.can_intersect(&templ)
+                    && !self
+                        .caps_warned
+                        .swap(true, std::sync::atomic::Ordering::Relaxed)
+                {
+                    // Upstream can only offer what this pad cannot take: negotiation
+                    // will fail upstream with a bare "not-negotiated"; say why here.
+                    gst::element_imp_warning!(
+                        self,
+                        gst::StreamError::Format,
+                        ("Upstream offers only video the face pad cannot take: {}", f),
+                        ["{}", caps_advice("sink")]
+                    );
+                }
                 let caps = match q.filter() {
                     Some(f) => f.intersect_with_mode(&downstream, gst::CapsIntersectMode::First),
                     None => downstream,
@@ -1689,8 +1862,19 @@ impl AggregatorImpl for LsydRelight {
             }
             gst::QueryViewMut::AcceptCaps(q) => {
                 let caps = q.caps().to_owned();
-                let ok = caps.can_intersect(&video_caps())
-                    && self.obj().src_pad().peer_query_accept_caps(&caps);
+                let ok = if !caps.can_intersect(&templ) {
+                    if caps.is_fixed() {
+                        gst::element_imp_error!(
+                            self,
+                            gst::StreamError::Format,
+                            ("{} cannot take {}", pad.name(), caps),
+                            ["{}", caps_advice(pad.name().as_str())]
+                        );
+                    }
+                    false
+                } else {
+                    !is_face || self.obj().src_pad().peer_query_accept_caps(&caps)
+                };
                 q.set_result(ok);
                 true
             }
@@ -1733,20 +1917,39 @@ impl AggregatorImpl for LsydRelight {
     fn aggregate(&self, timeout: bool) -> Result<gst::FlowSuccess, gst::FlowError> {
         let Some(face) = self.face_pad.peek_buffer() else {
             if self.face_pad.is_eos() {
-                if self.side.lock().started {
-                    self.side.push(SideItem::Event(gst::event::Eos::new()));
-                }
+                // The side stream ends too, even if it never showed anything.
+                let fps = lock(&self.state)
+                    .as_ref()
+                    .and_then(|s| s.face_info.as_ref().map(|i| i.fps()))
+                    .unwrap_or(gst::Fraction::new(0, 1));
+                self.start_side_stream(fps);
+                self.side.push(SideItem::Event(gst::event::Eos::new()));
                 return Err(gst::FlowError::Eos);
             }
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
         };
         if is_gap(&face) {
-            // Nothing to relight: the gap goes on downstream, as a gap.
+            // Nothing to relight: the gap goes on downstream, as a gap, and to
+            // monitor_src too. Before the first frame (or after a flush) downstream has
+            // no segment yet, and a gap may not precede it: that gap is dropped.
             self.face_pad.drop_buffer();
-            let gap = gst::event::Gap::builder(face.pts().unwrap_or(gst::ClockTime::ZERO))
-                .duration(face.duration())
-                .build();
-            self.obj().src_pad().push_event(gap);
+            let src = self.obj().src_pad().clone();
+            if let Some(pts) = face.pts()
+                && src.sticky_event::<gst::event::Segment>(0).is_some()
+            {
+                src.push_event(
+                    gst::event::Gap::builder(pts)
+                        .duration(face.duration())
+                        .build(),
+                );
+                if self.monitor_src.is_linked() && self.side.lock().started {
+                    self.side.push(SideItem::Event(
+                        gst::event::Gap::builder(pts)
+                            .duration(face.duration())
+                            .build(),
+                    ));
+                }
+            }
             return Ok(gst::FlowSuccess::Ok);
         }
         let s = self.settings();

@@ -455,6 +455,38 @@ pub fn heldout_clips(seed: u64) -> Vec<Clip> {
     v
 }
 
+/// The nine monitor lights of the validation set: the same kinds as the held-out
+/// set's, from their own stream, with the bright patches elsewhere.
+pub fn validation_clips(seed: u64) -> Vec<Clip> {
+    let mut r = Rng::stream(seed, "validation");
+    let patch = |x: f32, y: f32| Clip::Patch {
+        colour: Vec3::new(1.0, 1.0, 1.0),
+        size: 0.3,
+        from: (x, y),
+        to: (x, y),
+    };
+    let mut v = vec![
+        Clip::random_env(&mut r, 0.0),
+        Clip::random_env(&mut r, 0.0),
+        patch(0.25, 0.3),
+        patch(0.75, 0.6),
+        Clip::Text {
+            seed: r.next_u64(),
+            dark: true,
+            scroll_speed: 0.0,
+        },
+        Clip::Solid(Vec3::new(
+            r.range(0.2, 0.9),
+            r.range(0.4, 1.0),
+            r.range(0.2, 0.8),
+        )),
+    ];
+    for _ in 0..3 {
+        v.push(Clip::random_scene(&mut r, 0.0));
+    }
+    v
+}
+
 /// Target lights that test recordings are relit to, with names for file names.
 pub fn target_clips() -> Vec<(&'static str, Clip)> {
     let mut r = Rng::stream(1, "target");

@@ -358,18 +358,83 @@ pub fn heldout_look() -> Look {
     look
 }
 
-/// Writes the held-out set: `images.npy` (9 poses, 9 lights, S, S, 3) as the
+/// Nine poses of the validation set, drawn from their own stream: never on a
+/// training trajectory, and not the held-out set's.
+pub fn validation_states(subject_seed: u64) -> Vec<State> {
+    let mut r = Rng::stream(subject_seed, "validation-poses");
+    (0..9)
+        .map(|_| State {
+            pose: Pose {
+                yaw: r.range(-25.0, 25.0).to_radians(),
+                pitch: r.range(-12.0, 12.0).to_radians(),
+                roll: r.range(-6.0, 6.0).to_radians(),
+                translation: Vec3::new(
+                    r.range(-0.03, 0.03),
+                    r.range(-0.02, 0.02),
+                    r.range(-0.06, 0.06),
+                ),
+                present: true,
+            },
+            expression: Expression {
+                mouth_open: if r.chance(0.4) {
+                    r.range(0.1, 0.7)
+                } else {
+                    0.0
+                },
+                smile: if r.chance(0.4) {
+                    r.range(0.2, 0.9)
+                } else {
+                    0.0
+                },
+                blink: 0.0,
+            },
+        })
+        .collect()
+}
+
+/// The two fixed sets of 9 poses under 9 lights. Choices made while developing
+/// (the default model's width and resolution) are made on `Validation`, so the
+/// `Heldout` test set is never tuned to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TestSet {
+    Heldout,
+    Validation,
+}
+
+impl TestSet {
+    pub fn name(self) -> &'static str {
+        match self {
+            TestSet::Heldout => "heldout",
+            TestSet::Validation => "validation",
+        }
+    }
+
+    fn contents(self, subject_seed: u64) -> (Vec<State>, Vec<Clip>, Look) {
+        match self {
+            TestSet::Heldout => (
+                heldout_states(),
+                content::heldout_clips(subject_seed),
+                heldout_look(),
+            ),
+            TestSet::Validation => (
+                validation_states(subject_seed),
+                content::validation_clips(subject_seed),
+                Look::random(13, "validation-look"),
+            ),
+        }
+    }
+}
+
+/// Writes a test set: `images.npy` (9 poses, 9 lights, S, S, 3) as the
 /// webcam records them, `clean.npy` the same without sensor noise (exact
 /// ground truth), `monitor.npy` (9, H, W, 3), `keypoints.npy` and `truth.npy`.
-pub fn write_heldout(dir: &Path, subject_seed: u64, size: usize) -> io::Result<()> {
+pub fn write_test_set(dir: &Path, set: TestSet, subject_seed: u64, size: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
     let r = square_renderer(subject_seed, size)?;
-    let clips = content::heldout_clips(subject_seed);
+    let (states, clips, look) = set.contents(subject_seed);
     let (shown, cells) = still_lights(&r, &clips);
     let refs: Vec<&CellLight> = cells.iter().collect();
-    let states = heldout_states();
     let (np, nl) = (states.len(), refs.len());
-    let look = heldout_look();
     let sensor = Sensor::default();
     let mut noisy =
         crate::io::NpyWriter::<u8>::create(&dir.join("images.npy"), &[np, nl, size, size, 3])?;
@@ -384,7 +449,7 @@ pub fn write_heldout(dir: &Path, subject_seed: u64, size: usize) -> io::Result<(
                 &sensor
                     .capture(
                         img,
-                        hash(subject_seed, &[label("heldout")]),
+                        hash(subject_seed, &[label(set.name())]),
                         (p * nl + l) as u64,
                     )
                     .data,
@@ -410,7 +475,7 @@ pub fn write_heldout(dir: &Path, subject_seed: u64, size: usize) -> io::Result<(
     write_json(
         &dir.join("meta.json"),
         &serde_json::json!({
-            "kind": "heldout",
+            "kind": set.name(),
             "subject_seed": subject_seed,
             "poses": np,
             "lights": nl,

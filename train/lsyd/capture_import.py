@@ -104,20 +104,8 @@ def decode(video: Path, fps: int) -> np.ndarray:
     return frames
 
 
-def centre_square(frames: np.ndarray) -> np.ndarray:
-    """The element's default face region: the centred square of full height, at SIZE x SIZE."""
-    h, w = frames.shape[1:3]
-    s = min(h, w)
-    y0, x0 = (h - s) // 2, (w - s) // 2
-    out = np.empty((len(frames), SIZE, SIZE, 3), dtype=np.uint8)
-    for i in range(0, len(frames), 64):
-        crop = frames[i : i + 64, y0 : y0 + s, x0 : x0 + s]
-        out[i : i + 64] = np.clip(np.rint(data.area_resize(crop, SIZE)), 0, 255)
-    return out
-
-
 def import_capture(face: Path, monitor: Path, out: Path, fps: int = 10) -> dict:
-    faces = centre_square(decode(face, fps))
+    faces = data.resize_frames(data.centre_square(decode(face, fps)), SIZE)
     screens = decode(monitor, fps)
     n = min(len(faces), len(screens))
     keypoints = detect_keypoints(faces[:n])

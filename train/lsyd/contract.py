@@ -23,6 +23,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import onnxruntime as ort
 
 NAME = "lsydrelight-model"
 VERSION = 1
@@ -67,7 +68,7 @@ def stage_specs(resolution: int, widths: tuple[int, ...]) -> dict:
         "e6": [1, c3, r // 8, r // 8],
         "e7": [1, c4, r // 16, r // 16],
     }
-    delit_shapes = {f"f{i}": raw_shapes[f"e{i}"] for i in range(1, 8)}
+    delit_shapes = {f: raw_shapes[e] for e, f in zip(RAW, SMOOTHED)}
     light = [1, 3, LIGHT_ROWS, LIGHT_COLS]
     code = [1, CODE_DIM]
     stem = [1, c0, r, r]
@@ -161,3 +162,10 @@ def _area_matrix(n_in: int, n_out: int) -> np.ndarray:
         for j in range(int(np.floor(a)), min(int(np.ceil(b)), n_in)):
             m[i, j] = min(b, j + 1) - max(a, j)
     return (m / m.sum(axis=1, keepdims=True)).astype(np.float32)
+
+
+def open_session(path: Path, threads: int = 1) -> ort.InferenceSession:
+    """An ONNX Runtime CPU session of one stage file, for checks and measurements."""
+    opts = ort.SessionOptions()
+    opts.intra_op_num_threads = threads
+    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])

@@ -80,11 +80,20 @@ class PairSet:
         return self.images[s].float() / 255.0, self.lights[s], self.images[t].float() / 255.0, self.lights[t]
 
 
-def _resize_chunks(face: np.ndarray, resolution: int) -> np.ndarray:
-    out = np.empty((len(face), resolution, resolution, 3), dtype=np.uint8)
-    for i in range(0, len(face), 128):
-        out[i : i + 128] = np.clip(np.rint(area_resize(face[i : i + 128], resolution)), 0, 255)
+def resize_frames(frames: np.ndarray, resolution: int) -> np.ndarray:
+    """(N, H, W, 3) frames area-resized to (N, R, R, 3) uint8, a block at a time to bound memory."""
+    out = np.empty((len(frames), resolution, resolution, 3), dtype=np.uint8)
+    for i in range(0, len(frames), 128):
+        out[i : i + 128] = np.clip(np.rint(area_resize(frames[i : i + 128], resolution)), 0, 255)
     return out
+
+
+def centre_square(frames: np.ndarray) -> np.ndarray:
+    """The centred square of full height of (..., H, W, 3) frames: the element's default face region."""
+    h, w = frames.shape[-3:-1]
+    s = min(h, w)
+    y0, x0 = (h - s) // 2, (w - s) // 2
+    return frames[..., y0 : y0 + s, x0 : x0 + s, :]
 
 
 def _cached(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +105,7 @@ def _cached(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
         with np.load(path) as z:
             return z["images"], z["lights"]
     cap = Capture.load(session)
-    images, lights = _resize_chunks(cap.face, resolution), cap.lights()
+    images, lights = resize_frames(cap.face, resolution), cap.lights()
     np.savez(path, images=images, lights=lights)
     return images, lights
 
@@ -131,7 +140,7 @@ def exact_pairs(root: Path, resolution: int) -> PairSet:
     face = np.load(root / "face.npy", mmap_mode="r")  # (poses, lights, S, S, 3)
     monitor = np.load(root / "monitor.npy", mmap_mode="r")
     n_pose, n_light = face.shape[:2]
-    images = _resize_chunks(face.reshape(-1, *face.shape[2:]), resolution)
+    images = resize_frames(face.reshape(-1, *face.shape[2:]), resolution)
     lights = contract.light_from_frames(np.asarray(monitor).reshape(-1, *monitor.shape[2:]))
     idx = np.arange(n_pose * n_light).reshape(n_pose, n_light)
     pairs = np.array([(p[i], p[j]) for p in idx for i in range(n_light) for j in range(n_light) if i != j])
@@ -144,7 +153,8 @@ def exact_pairs(root: Path, resolution: int) -> PairSet:
 
 @dataclasses.dataclass
 class Heldout:
-    """The 9 poses x 9 lights test set: webcam frames, exact clean frames, lights."""
+    """A 9 poses x 9 lights set (the held-out test set, or the validation set):
+    webcam frames, exact clean frames, lights."""
 
     images: np.ndarray  # (9, 9, S, S, 3) uint8, inputs
     clean: np.ndarray  # (9, 9, S, S, 3) uint8, exact ground truth
@@ -157,12 +167,6 @@ class Heldout:
             clean=np.load(path / "clean.npy"),
             lights=contract.light_from_frames(np.load(path / "monitor.npy")),
         )
-
-    def pairs(self) -> list[tuple[int, int, int]]:
-        """(pose, source light, target light) for the 36 unordered light pairs of each pose,
-        both directions: 648 relightings covering the paper's 324 pairs."""
-        n_pose, n_light = self.images.shape[:2]
-        return [(p, i, j) for p in range(n_pose) for i in range(n_light) for j in range(n_light) if i != j]
 
 
 def read_y4m(path: Path) -> tuple[np.ndarray, int]:
@@ -212,10 +216,7 @@ class RecordingCrops:
         meta = json.loads((path / "meta.json").read_text())
 
         def crop(frames: np.ndarray) -> np.ndarray:
-            h, w = frames.shape[1:3]
-            s = min(h, w)
-            y0, x0 = (h - s) // 2, (w - s) // 2
-            return area_resize(frames[:, y0 : y0 + s, x0 : x0 + s], resolution)
+            return area_resize(centre_square(frames), resolution)
 
         face, _ = read_y4m(path / "face.y4m")
         monitor, _ = read_y4m(path / "monitor.y4m")

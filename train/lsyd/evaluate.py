@@ -10,8 +10,9 @@
   FLIP, and monitor-prediction MAE.
 - Table 2: temporal consistency on the test recordings relit to each target light:
   the paper's adjacent-frame RMSE and error rates, the change error against the
-  ground truth's changes, and accuracy; ablating feature smoothing and
-  source-light averaging.
+  ground truth's changes, and accuracy; ablating feature smoothing,
+  source-light averaging and LCFN de-lighting (whose absence leaves the skips
+  lit, so smoothing them smooths the light as well).
 - Table 3: ablation of LCFN de-lighting and of source-light prediction.
 
 Outputs ``<out>.md``, ``<out>.json`` and a bar chart ``<out>.png``. Relit crops
@@ -42,26 +43,19 @@ def _img(x: np.ndarray) -> torch.Tensor:
 @torch.no_grad()
 def heldout_scores(net, cfg, held: data.Heldout, known_source: bool) -> dict[str, float]:
     """Table 1/3 metrics of one network on the held-out set."""
-    res = cfg.net.resolution
-    small = data.area_resize(held.images, res)  # (9, 9, r, r, 3)
     lights = torch.from_numpy(held.lights)
-    scores = {"rmse": [], "ms_ssim": [], "flip": [], "monitor_mae": []}
-    for p in range(held.images.shape[0]):
-        for i in range(held.images.shape[1]):
-            js = [j for j in range(held.images.shape[1]) if j != i]
-            x = _img(np.repeat(small[p, i][None], len(js), 0))
-            src = lights[i][None].expand(len(js), -1, -1, -1) if known_source else None
-            relit, predicted = net(x, src, lights[js])
-            relit = relit.clamp(0, 1).numpy()
-            if predicted is not None:
-                scores["monitor_mae"].append(float((predicted[0] - lights[i]).abs().mean()))
-            for k, j in enumerate(js):
-                out = metrics.transfer(held.images[p, i], x[k].numpy(), relit[k])
-                gt = held.clean[p, j]
-                scores["rmse"].append(metrics.rmse(out, gt))
-                scores["ms_ssim"].append(metrics.ms_ssim(out, gt))
-                scores["flip"].append(metrics.flip(out, gt))
-    return {k: float(np.mean(v)) if v else float("nan") for k, v in scores.items()}
+    monitor_mae: list[float] = []
+
+    def relight(x: np.ndarray, _pose: int, i: int, targets: list[int]) -> np.ndarray:
+        batch = torch.from_numpy(x)[None].expand(len(targets), -1, -1, -1)
+        src = lights[i][None].expand(len(targets), -1, -1, -1) if known_source else None
+        relit, predicted = net(batch, src, lights[targets])
+        if predicted is not None:
+            monitor_mae.append(float((predicted[0] - lights[i]).abs().mean()))
+        return relit.clamp(0, 1).numpy()
+
+    scores = metrics.score_test_set(held, cfg.net.resolution, relight)
+    return {**scores, "monitor_mae": float(np.mean(monitor_mae)) if monitor_mae else float("nan")}
 
 
 class Sequence:
@@ -141,7 +135,6 @@ def main() -> None:
         k: load_network(getattr(a, k.replace("-", "_")))
         for k in ("ours", "sun", "sengupta", "no-delight", "no-prediction", "neither")
     }
-    res = nets["ours"][1].net.resolution
     results: dict = {"table1": {}, "table2": {}, "table3": {}}
 
     def held_row(key: str, known: bool) -> dict:
@@ -163,8 +156,17 @@ def main() -> None:
         "prediction, de-lighting (ours)": ours_known,
     }
 
-    recs = [data.RecordingCrops.load(a.data / "recordings" / n, res) for n in TABLE2_RECORDINGS]
+    # Each network sees the recordings at its own resolution.
+    crops: dict[int, list[data.RecordingCrops]] = {}
+
+    def recordings(cfg) -> list[data.RecordingCrops]:
+        r = cfg.net.resolution
+        if r not in crops:
+            crops[r] = [data.RecordingCrops.load(a.data / "recordings" / n, r) for n in TABLE2_RECORDINGS]
+        return crops[r]
+
     ours, cfg = nets["ours"]
+    plain, plain_cfg = nets["no-delight"]
     rows2 = {
         "Sun et al. 2019": dict(net=nets["sun"][0], cfg=nets["sun"][1], alpha=1.0, beta=0.6, frames=1, known=True),
         "Sengupta et al. 2021": dict(
@@ -177,10 +179,15 @@ def main() -> None:
         "Ours + L_src avg": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=3, known=True),
         "Ours + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=1, known=True),
         "Ours + L_src avg + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=3, known=True),
+        # Without LCFN the skips carry the source light, so smoothing them smooths light too.
+        "No LCFN + L_src avg": dict(net=plain, cfg=plain_cfg, alpha=1.0, beta=0.6, frames=3, known=True),
+        "No LCFN + L_src avg + skip smoothing": dict(
+            net=plain, cfg=plain_cfg, alpha=0.7, beta=0.6, frames=3, known=True
+        ),
     }
     for name, kw in rows2.items():
         print(f"recordings: {name}", flush=True)
-        results["table2"][name] = mean_over(recs, **kw)
+        results["table2"][name] = mean_over(recordings(kw["cfg"]), **kw)
 
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.with_suffix(".json").write_text(json.dumps(results, indent=2) + "\n")

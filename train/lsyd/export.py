@@ -16,7 +16,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 import torch
 from torch import nn
 
@@ -146,23 +145,17 @@ def export(run: Path, data_root: Path, out: Path) -> dict:
     return {"config": cfg, "parity": report}
 
 
-def _session(path: Path) -> ort.InferenceSession:
-    opts = ort.SessionOptions()
-    opts.intra_op_num_threads = 1
-    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
-
-
 def parity(folder: Path, specs: dict, ref: dict[str, np.ndarray]) -> dict[str, float]:
     """Max abs difference of each stage's outputs (given PyTorch's inputs) and of the
     whole chain run in ONNX Runtime alone; raises when over the tolerance."""
     diffs = {}
     for name, spec in specs.items():
-        sess = _session(folder / spec["file"])
+        sess = contract.open_session(folder / spec["file"])
         feed = {t["name"]: ref[t["name"]] for t in spec["inputs"]}
         outs = sess.run([t["name"] for t in spec["outputs"]], feed)
         diffs[name] = max(float(np.abs(o - ref[t["name"]]).max()) for o, t in zip(outs, spec["outputs"]))
     # The chain: ONNX Runtime's own intermediate tensors feed the next stage.
-    s = {n: _session(folder / sp["file"]) for n, sp in specs.items()}
+    s = {n: contract.open_session(folder / sp["file"]) for n, sp in specs.items()}
     enc = dict(zip([t["name"] for t in specs["encoder"]["outputs"]], s["encoder"].run(None, {"image": ref["image"]})))
     (src_code,) = s["light_encoder"].run(None, {"light": ref["light"]})
     (tgt_code,) = s["light_encoder"].run(None, {"light": ref["target_light"]})
@@ -174,6 +167,25 @@ def parity(folder: Path, specs: dict, ref: dict[str, np.ndarray]) -> dict[str, f
     if worst > PARITY_TOLERANCE:
         raise SystemExit(f"ONNX Runtime differs from PyTorch by {worst:.2e} > {PARITY_TOLERANCE:.0e}: {diffs}")
     return diffs
+
+
+def training_data(run: Path, data_root: Path) -> str:
+    """One line on what the run trained on, from its pairing record and the captures' metadata."""
+    sessions = json.loads((run / "pairing.json").read_text())["sessions"] if (run / "pairing.json").exists() else []
+    metas = [json.loads(p.read_text()) for p in sorted((data_root / "captures").glob("*/meta.json"))]
+    frames = sum(m.get("frames", 0) for m in metas)
+    subjects = sorted({m["spec"]["subject_seed"] for m in metas if "spec" in m})
+    pairs = sum(s["pairs"] for s in sessions)
+    return (
+        f"{len(metas)} capture sessions ({frames} frames) of subject seed(s) {subjects}; "
+        f"{pairs} training pairs by facial keypoints"
+    )
+
+
+def machine_record(run: Path) -> list[dict]:
+    """Which machine trained which steps (``lsyd.train`` writes it)."""
+    path = run / "machine.json"
+    return json.loads(path.read_text()) if path.exists() else []
 
 
 def main() -> None:
@@ -193,7 +205,8 @@ def main() -> None:
         "batch": cfg.batch,
         "seed": cfg.seed,
         "pairs": cfg.pairs,
-        "data": "deskstage captures of the default subject (see models/README.md)",
+        "data": training_data(a.run, a.data),
+        "machine": machine_record(a.run),
     }
     metrics = json.loads(a.metrics.read_text()) if a.metrics else {}
     m = contract.manifest(a.name or a.out.name, cfg.net.resolution, cfg.net.widths, "fp32", training, metrics)

@@ -10,8 +10,8 @@ the papers differ in:
   A light decoder predicts the source monitor image from pooled encoder
   features fused by learned confidence.
 - ``SunNet`` (Sun et al. 2019): a light bottleneck. The source light is
-  predicted at the bottleneck by confidence-weighted fusion and replaced by
-  the target light's code; skips are plain.
+  predicted at the bottleneck by confidence-weighted fusion, and the target
+  light's code is joined to the bottleneck features; skips are plain.
 - ``SenguptaNet`` (Sengupta et al. 2021): source and target light codes are
   given at the bottleneck; skips are plain.
 
@@ -232,7 +232,7 @@ class LcfnNet(nn.Module):
 
 class SunNet(nn.Module):
     """Sun et al. 2019: the light is a bottleneck. The source light is predicted from
-    the bottleneck by confidence fusion and replaced there by the target's code."""
+    the bottleneck by confidence fusion; the target's code is joined to the bottleneck."""
 
     def __init__(self, cfg: NetConfig):
         super().__init__()
@@ -287,8 +287,10 @@ def build(cfg: NetConfig) -> nn.Module:
     return nets[cfg.arch](cfg)
 
 
-def conv_flops(model: nn.Module, resolution: int) -> int:
-    """Multiply-accumulates x 2 of the convolutions and linear layers for one frame."""
+def frame_flops(net: LcfnNet, resolution: int) -> int:
+    """FLOPs (multiply-accumulates x 2 of convolutions and linear layers) of one frame as
+    the engine runs it with the source light known: the encoder, one light code (the
+    target's is computed once), de-lighting and the decoder; no light prediction."""
     total = 0
 
     def hook(mod, inp, out):
@@ -299,11 +301,12 @@ def conv_flops(model: nn.Module, resolution: int) -> int:
         elif isinstance(mod, nn.Linear):
             total += 2 * mod.in_features * out.numel()
 
-    handles = [m.register_forward_hook(hook) for m in model.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
+    light = torch.zeros(1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
     with torch.no_grad():
-        img = torch.zeros(1, 3, resolution, resolution)
-        light = torch.zeros(1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
-        model(img, light, light)
+        target_code = net.light_encoder(light)
+        handles = [m.register_forward_hook(hook) for m in net.modules() if isinstance(m, (nn.Conv2d, nn.Linear))]
+        stem, feats = net.encode(torch.zeros(1, 3, resolution, resolution))
+        net.decode(stem, net.delit(feats, net.light_encoder(light)), target_code)
     for h in handles:
         h.remove()
     return total

@@ -15,49 +15,59 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
+import re
 from pathlib import Path
 
 import numpy as np
+import torch
 
 from . import benchmark, contract, data, metrics
-from .train import TrainConfig
+from .train import TrainConfig, hardware
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def heldout(folder: Path, held: data.Heldout) -> dict:
+    """Accuracy with the source light known and predicted, and the prediction's error."""
     net = benchmark.OrtModel(folder, 2)
-    res = net.m["resolution"]
-    small = data.area_resize(held.images, res) / 255.0
     codes = [net.code(held.lights[j][None]) for j in range(held.lights.shape[0])]
     out = {}
     for mode in ("known", "predicted"):
-        scores: dict[str, list[float]] = {"rmse": [], "ms_ssim": [], "flip": [], "monitor_mae": []}
-        for p in range(held.images.shape[0]):
-            for i in range(held.images.shape[1]):
-                x = np.ascontiguousarray(small[p, i].transpose(2, 0, 1)[None], dtype=np.float32)
-                enc = dict(zip(net.enc_names, net.s["encoder"].run(None, {"image": x})))
-                (pred,) = net.s["light_decoder"].run(None, {k: enc[k] for k in ("e2", "e4", "e6")})
-                if mode == "known":
-                    scores["monitor_mae"].append(float(np.abs(pred[0] - held.lights[i]).mean()))
-                source = held.lights[i][None] if mode == "known" else pred
-                for j in range(held.images.shape[1]):
-                    if j == i:
-                        continue
-                    relit = net.relight(x, source, codes[j])[0]
-                    full = metrics.transfer(held.images[p, i], x[0], relit)
-                    gt = held.clean[p, j]
-                    scores["rmse"].append(metrics.rmse(full, gt))
-                    scores["ms_ssim"].append(metrics.ms_ssim(full, gt))
-                    scores["flip"].append(metrics.flip(full, gt))
-        out[mode] = {k: float(np.mean(v)) for k, v in scores.items() if v}
+        monitor_mae: list[float] = []
+        colours: list[tuple[np.ndarray, np.ndarray]] = []  # (predicted, true) mean RGB of the screen
+
+        def relight(
+            x: np.ndarray,
+            _pose: int,
+            i: int,
+            targets: list[int],
+            mode: str = mode,
+            mae: list = monitor_mae,
+            colours: list = colours,
+        ) -> np.ndarray:
+            enc = dict(zip(net.enc_names, net.s["encoder"].run(None, {"image": x[None]})))
+            (pred,) = net.s["light_decoder"].run(None, {k: enc[k] for k in ("e2", "e4", "e6")})
+            mae.append(float(np.abs(pred[0] - held.lights[i]).mean()))
+            colours.append((pred[0].mean(axis=(1, 2)), held.lights[i].mean(axis=(1, 2))))
+            source = held.lights[i][None] if mode == "known" else pred
+            return np.concatenate([net.relight(x[None], source, codes[j]) for j in targets])
+
+        out[mode] = metrics.score_test_set(held, net.m["resolution"], relight)
+        if mode == "known":
+            out[mode]["monitor_mae"] = float(np.mean(monitor_mae))
+            pred, true = (np.array(c) for c in zip(*colours))
+            # Does the prediction follow the screen's brightness, and its colour (blue minus red)?
+            out[mode]["monitor_brightness_corr"] = float(np.corrcoef(pred.mean(1), true.mean(1))[0, 1])
+            out[mode]["monitor_colour_corr"] = float(
+                np.corrcoef(pred[:, 2] - pred[:, 0], true[:, 2] - true[:, 0])[0, 1]
+            )
     # The floor: the input itself, unrelit, against the target's ground truth.
+    n_pose, n_light = held.images.shape[:2]
     unrelit = [
         metrics.rmse(held.images[p, i], held.clean[p, j])
-        for p in range(held.images.shape[0])
-        for i in range(held.images.shape[1])
-        for j in range(held.images.shape[1])
+        for p in range(n_pose)
+        for i in range(n_light)
+        for j in range(n_light)
         if i != j
     ]
     out["input_unrelit_rmse"] = float(np.mean(unrelit))
@@ -66,21 +76,65 @@ def heldout(folder: Path, held: data.Heldout) -> dict:
 
 def measure(model: Path, held: data.Heldout, data_root: Path) -> dict:
     m = contract.read(model / "model.json")
+    n_pose, n_light = held.images.shape[:2]
     return {
         "command": f"python -m lsyd.modelcard --model {model.relative_to(ROOT)} --data {data_root.name}",
-        "pairs": 324,
-        "relightings": 648,
+        "pairs": n_pose * n_light * (n_light - 1) // 2,
+        "relightings": n_pose * n_light * (n_light - 1),
         **heldout(model, held),
         "gflop_per_frame": benchmark.model_flops(model),
         "network_ms_2_threads": benchmark.time_ort(model, 2),
         "network_ms_1_thread": benchmark.time_ort(model, 1),
-        "machine": f"{platform.processor() or platform.machine()}, 2 cores",
+        "machine": hardware(torch.device("cpu")),
         "parameters_mb": sum(p.stat().st_size for p in model.glob("*.onnx")) / 1e6,
         "resolution": m["resolution"],
     }
 
 
-def card(model: Path, run: Path | None) -> str:
+def data_lines(data_root: Path, run: Path | None) -> list[str]:
+    """What the model trained on, from the captures' metadata and the run's pairing record."""
+    metas = [json.loads(p.read_text()) for p in sorted((data_root / "captures").glob("*/meta.json"))]
+    if not metas:
+        return [f"- Captures: not found under {data_root}/captures."]
+    spec = metas[0]["spec"]
+    frames = sum(x["frames"] for x in metas)
+    ratios = [float(r) for x in metas for r in re.findall(r"ratio: ([0-9.]+)", x.get("ambient", ""))]
+    lines = [
+        f"- {len(metas)} capture sessions of {spec['seconds']:g} s at {spec['fps']:g} frames a second ({frames:,} "
+        f"frames, {spec['size']} x {spec['size']}) of subject seed {spec['subject_seed']}, each with its own outfit "
+        f"and room light ({100 * min(ratios):.0f}-{100 * max(ratios):.0f}% of a white monitor's light), the monitor "
+        "playing scenes, pans, fades, text pages, solid colours, moving bright patches and environment maps "
+        "(`deskstage all --out data`).",
+    ]
+    pairing_path = run / "pairing.json" if run else None
+    if pairing_path and pairing_path.exists():
+        record = json.loads(pairing_path.read_text())
+        sessions = record["sessions"]
+        pairs = sum(x["pairs"] for x in sessions)
+        precision = sum(x["pairs"] * x["precision"] for x in sessions) / max(pairs, 1)
+        lines.append(
+            "- Training pairs found by facial keypoints within each session, as on real captures (`lsyd.pairing`, "
+            f"threshold {record['rule']['max_keypoint_distance']:g} of the inter-ocular distance): {pairs:,} ordered "
+            f"pairs, {100 * precision:.1f}% of them within 2 degrees, 5 mm and 0.1 expression of the same pose by "
+            "the simulator's truth."
+        )
+    lines.append(
+        "- Never seen in training: the held-out set's 9 poses, 9 lights and outfit, the validation set, and the "
+        "test recordings."
+    )
+    return lines
+
+
+def machine_line(sessions: list[dict]) -> str:
+    """Where and how long the model trained, from ``lsyd.train``'s record."""
+    if not sessions:
+        return "an unrecorded machine"
+    minutes = sum(x["seconds"] for x in sessions) / 60
+    machines = sorted({f"{x['hardware']} ({x['device']}, {x['cpu_threads']} threads)" for x in sessions})
+    return f"{' and '.join(machines)} in {minutes:.0f} minutes"
+
+
+def card(model: Path, run: Path | None, data_root: Path) -> str:
     m = contract.read(model / "model.json")
     h = m["metrics"].get("heldout", {})
     e = m["metrics"].get("element", {})
@@ -93,27 +147,19 @@ def card(model: Path, run: Path | None) -> str:
     lines = [
         f"# Model card: `{model.name}`",
         "",
-        "The personalised relighting network of the default synthetic subject (the desk light-stage",
-        "simulator's person, seed 7), in the [model contract](CONTRACT.md)'s five stages plus the optional",
-        "presence stage.",
+        "The personalised relighting network of the desk light-stage simulator's default person, in the",
+        "[model contract](CONTRACT.md)'s five stages plus the optional presence stage.",
         "",
         "## Data",
         "",
-        "- 16 capture sessions of 60 s at 10 frames a second (9,600 frames, 256 x 256), each with its own outfit and",
-        "  room light (ceiling, lamp left or right, window; 8-35% of a white monitor's light), the monitor playing",
-        "  scenes, pans, fades, text pages, solid colours, moving bright patches and environment maps",
-        "  (`deskstage all --out data`).",
-        "- Training pairs found by facial keypoints within each session, as on real captures",
-        "  (`lsyd.pairing`, threshold 0.02 of the inter-ocular distance; about 95,000 ordered pairs, 93-96% of them",
-        "  within 2 degrees, 5 mm and 0.1 expression of the same pose by the simulator's truth).",
-        "- Never seen in training: the held-out set's 9 poses, 9 lights and outfit, and the test recordings.",
+        *data_lines(data_root, run),
         "",
         "## Configuration",
         "",
     ]
     if cfg:
         w = cfg.weights
-        machine = m["training"].get("machine", "the 2-core CPU build machine")
+        machine = machine_line(m["training"].get("machine", []))
         lines += [
             f"- Architecture: the paper's LCFN U-Net at {cfg.net.resolution} x {cfg.net.resolution}, widths "
             f"{list(cfg.net.widths)} ({cfg.net.width:g} of the paper's 32-64-128-256-512), light codes of 256.",
@@ -126,13 +172,14 @@ def card(model: Path, run: Path | None) -> str:
             f"{100 * w.unknown_source:.0f}% of steps de-light with the predicted source light.",
         ]
     lines += [
-        f"- Size: {h.get('parameters_mb', 0):.1f} MB of ONNX graphs; {h.get('gflop_per_frame', 0):.2f} GFLOP a frame.",
+        f"- Size: {h.get('parameters_mb', 0):.1f} MB of ONNX graphs; {h.get('gflop_per_frame', 0):.3f} GFLOP a "
+        "frame as the element runs it (encoder, source light code, de-lighting, decoder).",
         "",
         "## Accuracy on the held-out set",
         "",
-        "648 relightings (every ordered light pair of 9 poses x 9 lights: the paper's 324 pairs both ways), against",
-        "exact ground truth at 256 x 256, the relit crop put back with the element's transfer. "
-        f"Command: `{h.get('command', '')}`.",
+        f"{h.get('relightings', 0)} relightings (every ordered light pair of 9 poses x 9 lights: the paper's "
+        f"{h.get('pairs', 0)} pairs both ways), against exact ground truth at 256 x 256, the relit crop put back "
+        f"with the element's transfer. Command: `{h.get('command', '')}`.",
         "",
         "| source light | RMSE (0-255) | MS-SSIM | FLIP | monitor MAE (linear) |",
         "|---|---|---|---|---|",
@@ -144,6 +191,15 @@ def card(model: Path, run: Path | None) -> str:
             lines.append(f"| {label} | {r['rmse']:.2f} | {r['ms_ssim']:.4f} | {r['flip']:.4f} | {mae} |")
     if "input_unrelit_rmse" in h:
         lines.append(f"| (the input, not relit) | {h['input_unrelit_rmse']:.2f} | | | |")
+    known = h.get("known", {})
+    if "monitor_colour_corr" in known:
+        lines += [
+            "",
+            "The predicted monitor against the true one, over the held-out frames: its brightness correlates "
+            f"{known['monitor_brightness_corr']:.2f}, its colour (blue minus red) {known['monitor_colour_corr']:.2f}. "
+            "A prediction that follows brightness but not colour relights the strength of an unknown light "
+            "better than its hue; give the element the monitor stream where colour matters.",
+        ]
     lines += [
         "",
         "## End to end through the element",
@@ -202,7 +258,7 @@ def main() -> None:
         m = json.loads((model / "model.json").read_text())
         m.setdefault("metrics", {})["heldout"] = measure(model, data.Heldout.load(a.data / "heldout"), a.data)
         contract.write(model / "model.json", m)
-    (model.parent / "README.md").write_text(card(model, a.run))
+    (model.parent / "README.md").write_text(card(model, a.run, a.data))
     print(f"wrote {model.parent / 'README.md'}")
 
 

@@ -18,7 +18,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-import onnxruntime as ort
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -49,8 +48,7 @@ class Presence(nn.Module):
 
 def small(frames: np.ndarray) -> torch.Tensor:
     """(N, H, W, 3) uint8 -> (N, 3, 64, 64) in [0, 1]."""
-    out = np.concatenate([data.area_resize(frames[i : i + 256], SIZE) for i in range(0, len(frames), 256)])
-    return data.to_tensor(out)
+    return data.to_tensor(data.resize_frames(frames, SIZE))
 
 
 def load(root: Path) -> tuple[torch.Tensor, torch.Tensor]:
@@ -69,9 +67,7 @@ def heldout(root: Path) -> tuple[torch.Tensor, torch.Tensor]:
     start, end = meta["spec"]["away"]
     fps = meta["spec"]["fps"]
     frames, _ = data.read_y4m(root / "recordings" / "walkaway" / "face.y4m")
-    h, w = frames.shape[1:3]
-    s = min(h, w)
-    crops = frames[:, (h - s) // 2 : (h + s) // 2, (w - s) // 2 : (w + s) // 2]
+    crops = data.centre_square(frames)
     away = crops[int(np.ceil(start * fps)) : int(end * fps)]
     there = np.concatenate([crops[: int(start * fps)], crops[int(np.ceil(end * fps)) :]])
     x = torch.cat([present, small(there), small(away)])
@@ -122,7 +118,7 @@ def main() -> None:
     path = a.model / "presence.onnx"
     example = torch.zeros(1, 3, SIZE, SIZE)
     torch.onnx.export(net, (example,), str(path), input_names=["image"], output_names=["presence"], dynamo=False)
-    sess = ort.InferenceSession(str(path), providers=["CPUExecutionProvider"])
+    sess = contract.open_session(path)
     onnx_logits = np.array([sess.run(None, {"image": hx.numpy()[i : i + 1]})[0][0, 0] for i in range(8)])
     parity = float(np.abs(onnx_logits - logits[:8].numpy()).max())
     if parity > 1e-4:

@@ -16,7 +16,7 @@ import csv
 import dataclasses
 import json
 import os
-import random
+import platform
 import time
 from pathlib import Path
 
@@ -144,7 +144,7 @@ class Trainer:
         )
         if pred_src is not None:
             terms["monitor"] = (
-                F.l1_loss(pred_src, l_src)
+                w.l1 * F.l1_loss(pred_src, l_src)
                 + w.perceptual * losses.light_perceptual(pred_src, l_src)
                 + w.cycle * F.l1_loss(pred_tgt, l_tgt)
             )
@@ -208,8 +208,6 @@ def train(
         if saved != cfg:
             raise SystemExit(f"{run}: --resume with a different configuration than the run was started with")
     config_path.write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
-    random.seed(cfg.seed)
-    np.random.seed(cfg.seed)
 
     t0 = time.time()
     pairs, reports = load_pairs(cfg, data_root)
@@ -230,11 +228,16 @@ def train(
 
     log_path = run / "log.csv"
     fields = ["step", "seconds", "g", "d", "l1", "perceptual", "cycle", "adversarial", "monitor"]
-    new_log = not (resume and log_path.exists())
-    with open(log_path, "w" if new_log else "a", newline="") as f:
+    # Rows logged after the checkpoint we resume from are trained again; keep them once.
+    kept = []
+    if resume and log_path.exists():
+        with open(log_path, newline="") as f:
+            kept = [row for row in csv.DictReader(f) if int(row["step"]) <= trainer.step]
+    session_start = trainer.step
+    with open(log_path, "w", newline="") as f:
         log = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        if new_log:
-            log.writeheader()
+        log.writeheader()
+        log.writerows(kept)
         bar = tqdm(total=cfg.steps, initial=trainer.step, desc=run.name, unit="step")
         start = time.time()
         end = min(cfg.steps, stop_at) if stop_at else cfg.steps
@@ -249,7 +252,34 @@ def train(
             if trainer.step % checkpoint_every == 0 or trainer.step == end:
                 trainer.save()
         bar.close()
+    record_session(run, device, session_start, trainer.step, time.time() - start)
     print(f"trained {trainer.step} of {cfg.steps} steps; checkpoint {ckpt}")
+
+
+def hardware(device: torch.device) -> str:
+    """The GPU's name, or the CPU's model and core count."""
+    if device.type == "cuda":
+        return torch.cuda.get_device_name(device)
+    info = Path("/proc/cpuinfo")
+    lines = info.read_text().splitlines() if info.exists() else []
+    names = [ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")]
+    return f"{names[0] if names else platform.machine()}, {os.cpu_count()} cores"
+
+
+def record_session(run: Path, device: torch.device, first: int, last: int, seconds: float) -> None:
+    """Appends which machine trained which steps, and how long it took, to ``machine.json``."""
+    path = run / "machine.json"
+    sessions = json.loads(path.read_text()) if path.exists() else []
+    sessions.append(
+        {
+            "steps": [first, last],
+            "seconds": round(seconds, 1),
+            "device": device.type,
+            "hardware": hardware(device),
+            "cpu_threads": torch.get_num_threads(),
+        }
+    )
+    path.write_text(json.dumps(sessions, indent=2) + "\n")
 
 
 def main() -> None:

@@ -3,7 +3,8 @@
 //! ```text
 //! deskstage captures  --out DIR [--sessions N] [--seconds S] [--fps F] [--seed N] [--subject N]
 //! deskstage paired    --out DIR [--poses N] [--lights N] [--subject N]
-//! deskstage heldout   --out DIR [--subject N]
+//! deskstage heldout   --out DIR [--subject N]   (the test set: 9 poses x 9 lights)
+//! deskstage validation --out DIR [--subject N]  (the same for choosing models; never the test set)
 //! deskstage absent    --out DIR [--frames N]   (the empty desk: the person away)
 //! deskstage recording --out DIR --name steady|slow|cuts|walkaway|call [--frames N] [--width W --height H]
 //! deskstage sheet     --out FILE.png [--subject N]
@@ -17,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec};
+use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, TestSet};
 use deskstage::subject::DEFAULT_SUBJECT_SEED;
 
 struct Args {
@@ -164,7 +165,12 @@ fn run(a: &Args) -> Result<(), String> {
             dataset::write_paired(&a.out()?, &spec, a.num("poses", 600)?, a.num("lights", 4)?)
                 .map_err(io)
         }
-        "heldout" => dataset::write_heldout(&a.out()?, subject, spec.size).map_err(io),
+        "heldout" => {
+            dataset::write_test_set(&a.out()?, TestSet::Heldout, subject, spec.size).map_err(io)
+        }
+        "validation" => {
+            dataset::write_test_set(&a.out()?, TestSet::Validation, subject, spec.size).map_err(io)
+        }
         "absent" => dataset::write_absent(&a.out()?, &spec, a.num("frames", 400)?).map_err(io),
         "recording" => {
             let name: String = a.num("name", String::new())?;
@@ -197,7 +203,10 @@ fn run(a: &Args) -> Result<(), String> {
             captures(&out.join("captures"), &spec)?;
             dataset::write_paired(&out.join("paired"), &spec, a.num("poses", 600)?, 4)
                 .map_err(io)?;
-            dataset::write_heldout(&out.join("heldout"), subject, spec.size).map_err(io)?;
+            for set in [TestSet::Heldout, TestSet::Validation] {
+                dataset::write_test_set(&out.join(set.name()), set, subject, spec.size)
+                    .map_err(io)?;
+            }
             dataset::write_absent(&out.join("absent"), &spec, a.num("absent", 400)?).map_err(io)?;
             for name in RecordingSpec::STANDARD {
                 let mut r = RecordingSpec::standard(name).expect("standard recording");
