@@ -154,7 +154,8 @@ def sustained_gflops(threads: int) -> float:
         [helper.make_tensor_value_info(prev, TensorProto.FLOAT, [1, c, hw, hw])],
         inits,
     )
-    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)])
+    # ir_version pinned: onnx 1.23 writes IR 14 by default, newer than ONNX Runtime 1.31 reads.
+    m = helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = threads
     s = ort.InferenceSession(m.SerializeToString(), opts, providers=["CPUExecutionProvider"])

@@ -2,7 +2,7 @@
 
     python -m lsyd.evaluate --data data --out results/paper \\
         --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
-        --no-delight runs/t-nodelight --no-prediction runs/t-nopred --neither runs/t-neither
+        --no-delight runs/t-nodelight --no-prediction runs/t-nopred [--neither runs/t-neither]
 
 - Table 1: relighting the held-out set (9 poses x 9 lights; every ordered pair of
   lights of a pose, 648 relightings over the paper's 324 pairs), ours with and
@@ -123,8 +123,9 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=Path("data"))
     p.add_argument("--out", type=Path, default=Path("results/paper"))
-    for name in ("ours", "sun", "sengupta", "no-delight", "no-prediction", "neither"):
+    for name in ("ours", "sun", "sengupta", "no-delight", "no-prediction"):
         p.add_argument(f"--{name}", type=Path, required=True)
+    p.add_argument("--neither", type=Path, default=None, help="Table 3's fourth cell; the row is left out without it")
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
     if a.threads:
@@ -134,6 +135,7 @@ def main() -> None:
     nets = {
         k: load_network(getattr(a, k.replace("-", "_")))
         for k in ("ours", "sun", "sengupta", "no-delight", "no-prediction", "neither")
+        if getattr(a, k.replace("-", "_")) is not None
     }
     results: dict = {"table1": {}, "table2": {}, "table3": {}}
 
@@ -149,8 +151,9 @@ def main() -> None:
         "Sengupta et al. 2021 (source given)": held_row("sengupta", True),
         "Ours, source given": ours_known,
     }
-    results["table3"] = {
-        "no prediction, no de-lighting": held_row("neither", True),
+    if "neither" in nets:
+        results["table3"]["no prediction, no de-lighting"] = held_row("neither", True)
+    results["table3"] |= {
         "prediction, no de-lighting": held_row("no-delight", True),
         "no prediction, de-lighting": held_row("no-prediction", True),
         "prediction, de-lighting (ours)": ours_known,
