@@ -132,6 +132,8 @@ fn main() -> Result<(), String> {
     let relit = a.out.join("relit.mp4");
     let predicted = a.out.join("predicted-monitor.mp4");
     let rgb = "videoconvert ! video/x-raw,format=RGB ! appsink sync=false";
+    // tune=zerolatency: x264's default lookahead holds more frames than a tee branch's
+    // queue does while the appsinks preroll, which stalls the whole pipeline.
     let desc = format!(
         "lsydrelight name=r \
          filesrc location=\"{face}\" ! decodebin ! videoconvert ! tee name=face \
@@ -141,10 +143,10 @@ fn main() -> Result<(), String> {
            screen. ! queue ! r.monitor_sink \
            screen. ! queue ! {rgb} name=shown \
          r.src ! tee name=out \
-           out. ! queue ! videoconvert ! x264enc speed-preset=fast ! mp4mux ! filesink location=\"{relit}\" \
+           out. ! queue ! videoconvert ! x264enc speed-preset=fast tune=zerolatency ! mp4mux ! filesink location=\"{relit}\" \
            out. ! queue ! {rgb} name=relit \
          r.monitor_src ! tee name=pred \
-           pred. ! queue ! videoconvert ! x264enc speed-preset=fast ! mp4mux ! filesink location=\"{predicted}\" \
+           pred. ! queue ! videoconvert ! x264enc speed-preset=fast tune=zerolatency ! mp4mux ! filesink location=\"{predicted}\" \
            pred. ! queue ! {rgb} name=predicted",
         face = a.face.display(),
         monitor = a.monitor.display(),

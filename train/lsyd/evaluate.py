@@ -2,7 +2,7 @@
 
     python -m lsyd.evaluate --data data --out results/paper \\
         --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
-        --no-delight runs/t-nodelight --no-prediction runs/t-nopred [--neither runs/t-neither]
+        --no-delight runs/t-nodelight [--no-prediction runs/t-nopred] [--neither runs/t-neither]
 
 - Table 1: relighting the held-out set (9 poses x 9 lights; every ordered pair of
   lights of a pose, 648 relightings over the paper's 324 pairs), ours with and
@@ -123,9 +123,10 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=Path("data"))
     p.add_argument("--out", type=Path, default=Path("results/paper"))
-    for name in ("ours", "sun", "sengupta", "no-delight", "no-prediction"):
+    for name in ("ours", "sun", "sengupta", "no-delight"):
         p.add_argument(f"--{name}", type=Path, required=True)
-    p.add_argument("--neither", type=Path, default=None, help="Table 3's fourth cell; the row is left out without it")
+    for name in ("no-prediction", "neither"):
+        p.add_argument(f"--{name}", type=Path, default=None, help="a Table 3 cell; its row is left out without it")
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
     if a.threads:
@@ -153,11 +154,10 @@ def main() -> None:
     }
     if "neither" in nets:
         results["table3"]["no prediction, no de-lighting"] = held_row("neither", True)
-    results["table3"] |= {
-        "prediction, no de-lighting": held_row("no-delight", True),
-        "no prediction, de-lighting": held_row("no-prediction", True),
-        "prediction, de-lighting (ours)": ours_known,
-    }
+    results["table3"]["prediction, no de-lighting"] = held_row("no-delight", True)
+    if "no-prediction" in nets:
+        results["table3"]["no prediction, de-lighting"] = held_row("no-prediction", True)
+    results["table3"]["prediction, de-lighting (ours)"] = ours_known
 
     # Each network sees the recordings at its own resolution.
     crops: dict[int, list[data.RecordingCrops]] = {}
