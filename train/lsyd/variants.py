@@ -25,8 +25,9 @@ from . import contract, data
 STAGES = ("light_encoder", "encoder", "light_decoder", "delight", "decoder")
 # Bounds on the relit image's difference from fp32 (sRGB in [0, 1]): mean and max
 # absolute difference over held-out relightings. ``tests/test_variants.py`` holds
-# every variant to them.
-ERROR_BOUNDS = {"fp16": (0.002, 0.03), "int8": (0.02, 0.25)}
+# every variant to them. The shipped model measures fp16 7.5e-5 mean, 6.1e-4 max, and int8
+# 0.0042 mean (about one 8-bit level), 0.038 max; the bounds leave room for other CPUs.
+ERROR_BOUNDS = {"fp16": (0.0005, 0.005), "int8": (0.01, 0.1)}
 
 
 def chain_inputs(model: Path, images: np.ndarray, lights: np.ndarray) -> dict[str, list[dict]]:
