@@ -130,23 +130,28 @@ fn properties(v: &Variant, threads: &str) -> Vec<(String, String)> {
 /// Per-frame latency through the element at a frame size. Frames go in one at a time
 /// (the next after the last came out), so each one's time is its own, not time spent
 /// queued behind the one before; pad probes time each frame in and out.
+/// An appsrc of 30 fps RGB frames in time format.
+fn rgb_source(width: i32, height: i32) -> gst_app::AppSrc {
+    gst_app::AppSrc::builder()
+        .caps(
+            &gst_video::VideoCapsBuilder::new()
+                .format(gst_video::VideoFormat::Rgb)
+                .width(width)
+                .height(height)
+                .framerate(gst::Fraction::new(30, 1))
+                .build(),
+        )
+        .format(gst::Format::Time)
+        .build()
+}
+
 fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, String> {
     common::init();
     let recording = deskstage::dataset::Recording::standard("call").ok_or("no call recording")?;
     // Rendered beforehand, so the renderer does not compete with the element.
     let shown: Vec<_> = (0..30).map(|i| recording.frame(i, false)).collect();
     let pipeline = gst::Pipeline::new();
-    let src = gst_app::AppSrc::builder()
-        .caps(
-            &gst_video::VideoCapsBuilder::new()
-                .format(gst_video::VideoFormat::Rgb)
-                .width(480)
-                .height(360)
-                .framerate(gst::Fraction::new(30, 1))
-                .build(),
-        )
-        .format(gst::Format::Time)
-        .build();
+    let src = rgb_source(480, 360);
     let scale = gst::parse::bin_from_description(
         &format!(
             "videoscale ! videoconvert ! capsfilter caps=video/x-raw,format=I420,width={w},height={h}"
@@ -154,17 +159,7 @@ fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, 
         true,
     )
     .map_err(|e| e.to_string())?;
-    let mon = gst_app::AppSrc::builder()
-        .caps(
-            &gst_video::VideoCapsBuilder::new()
-                .format(gst_video::VideoFormat::Rgb)
-                .width(256)
-                .height(144)
-                .framerate(gst::Fraction::new(30, 1))
-                .build(),
-        )
-        .format(gst::Format::Time)
-        .build();
+    let mon = rgb_source(256, 144);
     let r = gst::ElementFactory::make("lsydrelight")
         .name("r")
         .build()
