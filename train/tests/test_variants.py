@@ -42,6 +42,7 @@ def test_fp16_and_int8_stay_finite_and_close_to_fp32(sim_data, shipped_model, tm
     for precision, (mean_bound, max_bound) in variants.ERROR_BOUNDS.items():
         out = relight_all(tmp_path / precision, faces, lights)
         err = np.abs(out - reference)
+        print(f"{precision}: mean error {err.mean():.2g}, max {err.max():.2g}")  # shown with pytest -s
         assert err.mean() <= mean_bound, f"{precision}: mean error {err.mean():.4f} > {mean_bound}"
         assert err.max() <= max_bound, f"{precision}: max error {err.max():.4f} > {max_bound}"
         extreme = relight_all(tmp_path / precision, extreme_faces, extreme_lights)
