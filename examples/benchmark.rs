@@ -378,7 +378,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
     };
     let mut v = vec![base("default", "model", &default)];
     // Model size and resolution: every exported variant with the default element settings.
-    for run in ["t-lcfn", "p-r96", "p-r160", "p-w0125"] {
+    for run in ["t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96"] {
         let m = bench.join(run);
         if m.join("model.json").exists() {
             v.push(with(base(run, "model", &m), &[("skip-static", "false")]));

@@ -31,7 +31,7 @@ from .train import load_network
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "target" / "bench-models"
-VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125")
+VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96")
 
 
 def export_all(data_root: Path, runs: Path) -> None:

@@ -12,6 +12,7 @@ the export fails when ONNX Runtime differs by more than ``PARITY_TOLERANCE``.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 from pathlib import Path
 
@@ -205,6 +206,7 @@ def main() -> None:
         "batch": cfg.batch,
         "seed": cfg.seed,
         "pairs": cfg.pairs,
+        "losses": dataclasses.asdict(cfg.weights),
         "data": training_data(a.run, a.data),
         "machine": machine_record(a.run),
     }

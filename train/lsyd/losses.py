@@ -70,6 +70,18 @@ def light_perceptual(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return dx + dy
 
 
+def standardised_distance(a: list[torch.Tensor], b: list[torch.Tensor]) -> torch.Tensor:
+    """Mean over feature levels of the RMS difference of paired features (a[i] against
+    b[i], each (N, C, H, W)), each channel in units of its standard deviation over both.
+    Instance normalisation changes a channel's offset and scale, so raw distances would
+    compare two representations' units rather than their content."""
+    out = []
+    for x, y in zip(a, b):
+        std = torch.cat([x, y]).std(dim=(0, 2, 3), correction=0, keepdim=True) + 1e-6
+        out.append((((x - y) / std) ** 2).mean().add(1e-12).sqrt())
+    return torch.stack(out).mean()
+
+
 class PatchDiscriminator(nn.Module):
     """A PatchGAN discriminator (Isola et al. 2017) scoring overlapping patches, trained as an LSGAN."""
 

@@ -215,6 +215,10 @@ class LcfnNet(nn.Module):
             return [blk(e, source_code) for blk, e in zip(self.delight, feats)]
         return [act(blk(e)) for blk, e in zip(self.delight, feats)]
 
+    def delit_image(self, image: torch.Tensor, light: torch.Tensor) -> list[torch.Tensor]:
+        """The de-lit skip features of images whose source lights are given."""
+        return self.delit(self.encode(image)[1], self.light_encoder(light))
+
     def decode(self, stem: torch.Tensor, f: list[torch.Tensor], target_code: torch.Tensor) -> torch.Tensor:
         return self.decoder(stem, f, target_code)
 

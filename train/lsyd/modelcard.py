@@ -171,6 +171,14 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
             "as its perceptual term, and cycle on the target light). "
             f"{100 * w.unknown_source:.0f}% of steps de-light with the predicted source light.",
         ]
+        if w.delit_consistency or w.monitor_colour:
+            lines.append(
+                "- Added to the paper's losses (each off in the tables' runs; README, \"Beyond the paper\"): "
+                f"de-lit consistency x{w.delit_consistency:g}, the standardised distance between the de-lit "
+                "features of a pair's two images, each de-lit with its own light; monitor colour "
+                f"x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true screens' "
+                "mean colours."
+            )
     lines += [
         f"- Size: {h.get('parameters_mb', 0):.1f} MB of ONNX graphs; {h.get('gflop_per_frame', 0):.3f} GFLOP a "
         "frame as the element runs it (encoder, source light code, de-lighting, decoder).",

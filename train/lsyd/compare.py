@@ -1,0 +1,82 @@
+"""Compare trained runs on the validation set: what the additions beyond the paper change.
+
+    python -m lsyd.compare --data data --runs runs p-r96 e-r96
+
+Each run is exported to ``target/compare/<run>`` and scored with ONNX Runtime on the
+validation set (9 poses x 9 lights, exact ground truth): relighting RMSE with the
+source light known and predicted, the predicted monitor's MAE and how its brightness
+and colour (blue minus red) follow the true screen's (``modelcard.heldout``), and the
+de-lighting ratio (``delighting_ratios``). Prints a markdown table.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from . import contract, data, export, losses, modelcard
+
+ROOT = Path(__file__).resolve().parents[2]
+# The light pairs of a 9-light set (held-out or validation) that the de-lighting ratio compares.
+DELIGHT_PAIRS = ((0, 5), (2, 3), (0, 8), (4, 6))
+
+
+def delighting_ratios(folder: Path, held: data.Heldout) -> list[float]:
+    """For each pose and light pair: the standardised distance between one face's de-lit
+    features under the two lights, each de-lit with its own light, over the distance between
+    its raw encoder features (paper section 3.2). Below 1 when de-lighting removes the light."""
+    m = contract.read(folder / "model.json")
+    encoder = contract.open_session(folder / "encoder.onnx")
+    delight = contract.open_session(folder / "delight.onnx")
+    light_encoder = contract.open_session(folder / "light_encoder.onnx")
+    names = [o.name for o in encoder.get_outputs()]
+
+    def features(pose: int, light: int) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
+        image = data.to_tensor(data.area_resize(held.clean[pose, light], m["resolution"]))[None].numpy()
+        raw = dict(zip(names, encoder.run(None, {"image": image})))
+        (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
+        delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
+        return [torch.from_numpy(raw[f"e{i}"]) for i in range(1, 8)], [torch.from_numpy(d) for d in delit]
+
+    ratios = []
+    for a, b in DELIGHT_PAIRS:
+        for pose in range(held.clean.shape[0]):
+            (raw_a, delit_a), (raw_b, delit_b) = features(pose, a), features(pose, b)
+            delit = losses.standardised_distance(delit_a, delit_b)
+            raw = losses.standardised_distance(raw_a, raw_b)
+            ratios.append((delit / raw).item())
+    return ratios
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--data", type=Path, default=ROOT / "data")
+    p.add_argument("--runs", type=Path, default=ROOT / "runs")
+    p.add_argument("run", nargs="+", help="run folder names under --runs")
+    a = p.parse_args()
+    validation = data.Heldout.load(a.data / "validation")
+    rows = [
+        "| run | RMSE, source known | RMSE, source predicted | monitor MAE | monitor brightness corr "
+        "| monitor colour corr | de-lighting ratio (median) |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for run in a.run:
+        out = ROOT / "target" / "compare" / run
+        cfg = export.export(a.runs / run, a.data, out)["config"]
+        contract.write(out / "model.json", contract.manifest(run, cfg.net.resolution, cfg.net.widths, "fp32", {}, {}))
+        h = modelcard.heldout(out, validation)
+        known, predicted = h["known"], h["predicted"]
+        ratio = float(np.median(delighting_ratios(out, validation)))
+        rows.append(
+            f"| {run} | {known['rmse']:.2f} | {predicted['rmse']:.2f} | {known['monitor_mae']:.4f} "
+            f"| {known['monitor_brightness_corr']:.2f} | {known['monitor_colour_corr']:.2f} | {ratio:.3f} |"
+        )
+        print(rows[-1], flush=True)
+    print("\n".join(rows))
+
+
+if __name__ == "__main__":
+    main()
