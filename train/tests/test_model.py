@@ -2,60 +2,32 @@
 and resumable; export matches PyTorch and loads in ONNX Runtime."""
 
 import numpy as np
-import pytest
 import torch
 
-from lsyd import contract, data, export, train
+from lsyd import compare, contract, data, export, train
 
 
-def standardised_distance(a: list[np.ndarray], b: list[np.ndarray]) -> float:
-    """Mean over feature levels of the RMS difference of two images' features, each channel in
-    units of its standard deviation over both images. Instance normalisation changes each channel's
-    offset and scale, so raw distances would compare the two representations' units, not their content."""
-    out = []
-    for x, y in zip(a, b):
-        both = np.concatenate([x, y])
-        std = both.std(axis=(0, 2, 3), keepdims=True) + 1e-6
-        out.append(np.sqrt((((x - y) / std) ** 2).mean()))
-    return float(np.mean(out))
-
-
-@pytest.mark.xfail(
-    strict=True,
-    reason="the shipped model relights well (RMSE 7.8 against 19.7 unrelit) but its de-lit features are not "
-    "measurably closer than the raw ones (median ratio 0.954): the shallow levels move closer, the deep ones "
-    "apart. Strict, so a model that does de-light fails here until this mark goes",
-)
 def test_delighting_removes_the_source_light(sim_data, shipped_model):
     """The de-lit features of one face under two monitor lights are measurably closer
     than the raw encoder features (paper section 3.2)."""
-    m = contract.read(shipped_model / "model.json")
-    res = m["resolution"]
-    held = data.Heldout.load(sim_data / "heldout")
-    enc = contract.open_session(shipped_model / "encoder.onnx")
-    delight = contract.open_session(shipped_model / "delight.onnx")
-    light_encoder = contract.open_session(shipped_model / "light_encoder.onnx")
-    names = [o.name for o in enc.get_outputs()]
-
-    def features(pose: int, light: int) -> tuple[list[np.ndarray], list[np.ndarray]]:
-        image = data.to_tensor(data.area_resize(held.clean[pose, light], res))[None].numpy()
-        raw = dict(zip(names, enc.run(None, {"image": image})))
-        (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
-        delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
-        return [raw[f"e{i}"] for i in range(1, 8)], delit
-
-    ratios = []
-    for a, b in [(0, 5), (2, 3), (0, 8), (4, 6)]:  # outdoor map and text page, two patches, ...
-        for pose in range(held.images.shape[0]):
-            (raw_a, del_a), (raw_b, del_b) = features(pose, a), features(pose, b)
-            ratios.append(standardised_distance(del_a, del_b) / standardised_distance(raw_a, raw_b))
-    assert np.median(ratios) < 0.95, np.round(ratios, 3)
+    ratios = compare.delighting_ratios(shipped_model, data.Heldout.load(sim_data / "heldout"))
+    print(f"de-lit over raw feature distance, median of {len(ratios)}: {np.median(ratios):.3f}")
+    # The paper's losses alone give about 0.95 (README, "Beyond the paper"); the shipped
+    # model's de-lit consistency loss brings it far lower.
+    assert np.median(ratios) < 0.5, np.round(ratios, 3)
 
 
 def tiny_config(steps: int) -> train.TrainConfig:
     from lsyd import model
 
-    return train.TrainConfig(net=model.NetConfig(resolution=64, width=0.125), steps=steps, batch=4, pairs="both")
+    # With the shipped default's losses beyond the paper, so that their terms are trained and resumed too.
+    return train.TrainConfig(
+        net=model.NetConfig(resolution=64, width=0.125),
+        steps=steps,
+        batch=4,
+        pairs="both",
+        weights=train.LossWeights(delit_consistency=0.1, monitor_colour=1.0),
+    )
 
 
 def test_training_smoke_resume_and_export(sim_data, tmp_path):
