@@ -214,7 +214,10 @@ fn models_that_break_the_contract_are_refused_with_a_reason() {
     );
 
     let d = case("shape");
-    edit_manifest(&d, |m| m["resolution"] = 96.into());
+    edit_manifest(&d, |m| {
+        let shipped = m["resolution"].as_u64().expect("resolution is a number");
+        m["resolution"] = (shipped + 32).into()
+    });
     let e = load(&d)
         .err()
         .expect("shapes that disagree with the graphs are refused");
