@@ -44,8 +44,7 @@ class LossWeights:
     delit_consistency: float = 0.0
     # Not in the paper: L1 between the predicted and true screens' mean colours, inside the
     # monitor loss. With the per-pixel terms alone the predicted screen's colour does not
-    # follow the true one (blue-minus-red correlation 0.13 on the held-out set, 0.57 with
-    # this term, for light decoders refit on the 128 px model's frozen features).
+    # follow the true one (README, "Beyond the paper").
     monitor_colour: float = 0.0
 
 
