@@ -145,6 +145,21 @@ fn rgb_source(width: i32, height: i32) -> gst_app::AppSrc {
         .build()
 }
 
+/// Records when each buffer with a timestamp passes `pad`, then calls `after_each`.
+fn log_buffer_times(
+    pad: &gst::Pad,
+    log: Arc<Mutex<Vec<(u64, Instant)>>>,
+    after_each: impl Fn() + Send + Sync + 'static,
+) {
+    pad.add_probe(gst::PadProbeType::BUFFER, move |_, info| {
+        if let Some(pts) = info.buffer().and_then(|b| b.pts()) {
+            log.lock().unwrap().push((pts.nseconds(), Instant::now()));
+            after_each();
+        }
+        gst::PadProbeReturn::Ok
+    });
+}
+
 fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, String> {
     common::init();
     let recording = deskstage::dataset::Recording::standard("call").ok_or("no call recording")?;
@@ -189,31 +204,10 @@ fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, 
     let left: Arc<Mutex<Vec<(u64, Instant)>>> = Arc::default();
     let (done_tx, done_rx) = std::sync::mpsc::channel::<()>();
     let done_tx = Mutex::new(done_tx);
-    let log_entry = entered.clone();
-    r.static_pad("sink")
-        .unwrap()
-        .add_probe(gst::PadProbeType::BUFFER, move |_, info| {
-            if let Some(pts) = info.buffer().and_then(|b| b.pts()) {
-                log_entry
-                    .lock()
-                    .unwrap()
-                    .push((pts.nseconds(), Instant::now()));
-            }
-            gst::PadProbeReturn::Ok
-        });
-    let log_exit = left.clone();
-    r.static_pad("src")
-        .unwrap()
-        .add_probe(gst::PadProbeType::BUFFER, move |_, info| {
-            if let Some(pts) = info.buffer().and_then(|b| b.pts()) {
-                log_exit
-                    .lock()
-                    .unwrap()
-                    .push((pts.nseconds(), Instant::now()));
-                let _ = done_tx.lock().unwrap().send(());
-            }
-            gst::PadProbeReturn::Ok
-        });
+    log_buffer_times(&r.static_pad("sink").unwrap(), entered.clone(), || {});
+    log_buffer_times(&r.static_pad("src").unwrap(), left.clone(), move || {
+        let _ = done_tx.lock().unwrap().send(());
+    });
     pipeline
         .set_state(gst::State::Playing)
         .map_err(|e| e.to_string())?;
