@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use deskstage::content::{Clip, Playlist};
 use deskstage::dataset::Recording;
-use gstlsydrelight::engine::{self, Provider, Relighter, Source, Temporal};
+use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
@@ -45,11 +45,11 @@ fn main() -> Result<(), String> {
         .unwrap_or_else(common::default_model);
 
     let env = engine::environment(&paths::default_ort_library()).map_err(|e| e.to_string())?;
-    let mut r = Relighter::new(env, &model, threads, Provider::Cpu, Temporal::default())
-        .map_err(|e| e.to_string())?;
+    let network = Relighter::new(env, &model, threads, Provider::Cpu).map_err(|e| e.to_string())?;
+    let mut r = FramePolicy::new(network, Temporal::default(), Skips::default());
     r.set_target(&Light::uniform([0.9, 0.75, 0.6]))
         .map_err(|e| e.to_string())?;
-    let res = r.resolution();
+    let res = r.relighter().resolution();
 
     // 60 distinct frames of a recorded call and their monitor lights, cycled.
     let rec = Recording::standard("cuts").ok_or("no cuts recording")?;
@@ -65,11 +65,11 @@ fn main() -> Result<(), String> {
         .collect();
     let grey = Playlist::still(Clip::Solid(deskstage::math::Vec3::new(0.7, 0.7, 0.7))).frame(0.0);
     let probe_light = Light::from_frame(&Frame::packed_rgb(&grey.data, grey.width, grey.height));
-    let probe = |r: &mut Relighter| -> Result<Vec<f32>, String> {
+    let probe = |r: &mut FramePolicy| -> Result<Vec<f32>, String> {
         let mut out = Vec::new();
         for _ in 0..60 {
             out = r
-                .process(&inputs[0].0, Source::Known(probe_light.clone()), false)
+                .relight(&inputs[0].0, Source::Known(probe_light.clone()), false)
                 .map_err(|e| e.to_string())?
                 .relit
                 .ok_or("NaN in the probe")?;
@@ -94,7 +94,7 @@ fn main() -> Result<(), String> {
                 Source::Known(light.clone())
             };
             let out = r
-                .process(img, source, i % 25 == 0)
+                .relight(img, source, i % 25 == 0)
                 .map_err(|e| e.to_string())?;
             match out.relit {
                 Some(v) => out_of_range += v.iter().filter(|x| !(0.0..=1.0).contains(*x)).count(),

@@ -319,8 +319,27 @@ pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
 
 /// Constant of the gain `g`: keeps dark regions from amplifying noise.
 const GAIN_EPSILON: f32 = 0.02;
-/// Largest gain applied to the frame's detail.
+/// Largest gain applied to the frame's detail, and the most the relit image may
+/// brighten the input (plus [`INVENTED_LIGHT`]).
 const MAX_GAIN: f32 = 4.0;
+/// Luma (sRGB, [0, 1]) the relit image may add where the input is black. The
+/// network has learnt its person's face and can draw it into darkness; light the
+/// input does not carry is invented, so it is bounded to about 1 level in 8 bits.
+const INVENTED_LIGHT: f32 = 0.004;
+
+/// Rec. 709 luma of pixel `i` of a planar image of `n` pixels a channel.
+fn luma(img: &[f32], n: usize, i: usize) -> f32 {
+    0.2126 * img[i] + 0.7152 * img[n + i] + 0.0722 * img[2 * n + i]
+}
+
+/// Mean luma of a planar sRGB image, 3 × n.
+pub fn mean_luma(img: &[f32]) -> f32 {
+    let n = img.len() / 3;
+    if n == 0 {
+        return 0.0;
+    }
+    (0..n).map(|i| luma(img, n, i)).sum::<f32>() / n as f32
+}
 
 /// The lighting change at network resolution, ready to be applied to a frame.
 pub struct LightingChange {
@@ -342,11 +361,10 @@ impl LightingChange {
         matrix: YuvMatrix,
     ) -> LightingChange {
         let n = res * res;
-        let lum =
-            |img: &[f32], i: usize| 0.2126 * img[i] + 0.7152 * img[n + i] + 0.0722 * img[2 * n + i];
+        let relit = bound_invented_light(input, relit, n);
         let gain = (0..n)
             .map(|i| {
-                ((lum(relit, i) + GAIN_EPSILON) / (lum(input, i) + GAIN_EPSILON))
+                ((luma(&relit, n, i) + GAIN_EPSILON) / (luma(input, n, i) + GAIN_EPSILON))
                     .clamp(0.0, MAX_GAIN)
             })
             .collect();
@@ -366,7 +384,7 @@ impl LightingChange {
         };
         LightingChange {
             res,
-            base: to_channels(relit),
+            base: to_channels(&relit),
             input: to_channels(input),
             gain,
         }
@@ -450,6 +468,26 @@ impl LightingChange {
             }
         }
     }
+}
+
+/// The relit image with no pixel brighter than the input allows: at most
+/// `MAX_GAIN` times the input's luma plus `INVENTED_LIGHT`, scaled down in all
+/// three channels so its colour stays.
+fn bound_invented_light(input: &[f32], relit: &[f32], n: usize) -> Vec<f32> {
+    let mut out = relit.to_vec();
+    for i in 0..n {
+        let (allowed, have) = (
+            MAX_GAIN * luma(input, n, i) + INVENTED_LIGHT,
+            luma(relit, n, i),
+        );
+        if have > allowed {
+            let scale = allowed / have;
+            for c in 0..3 {
+                out[c * n + i] *= scale;
+            }
+        }
+    }
+    out
 }
 
 /// Weight of the lighting change by distance to the crop's inner edges.

@@ -6,6 +6,8 @@
 //! edge as the user sees it. Python computes the same in
 //! `train/lsyd/contract.py::light_from_frames`.
 
+use std::path::Path;
+
 use crate::frame::{AreaWeights, Frame, PixelFormat};
 
 pub const LIGHT_ROWS: usize = 16;
@@ -25,6 +27,17 @@ fn srgb_to_linear(v: f32) -> f32 {
     } else {
         ((v + 0.055) / 1.055).powf(2.4)
     }
+}
+
+/// The sRGB transfer function: linear light in [0, 1] to an 8-bit value.
+fn linear_to_srgb_byte(v: f32) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
 }
 
 struct Decode {
@@ -91,6 +104,60 @@ impl Light {
         Light(out)
     }
 
+    /// The light of a PNG image of monitor content (a target light).
+    pub fn from_png(path: &Path) -> Result<Light, String> {
+        let file = std::fs::File::open(path)
+            .map_err(|e| format!("cannot open target image {}: {e}", path.display()))?;
+        let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
+        decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
+        let mut reader = decoder
+            .read_info()
+            .map_err(|e| format!("{} is not a PNG image: {e}", path.display()))?;
+        let mut buf = vec![0; reader.output_buffer_size()];
+        let info = reader
+            .next_frame(&mut buf)
+            .map_err(|e| format!("cannot decode {}: {e}", path.display()))?;
+        let (w, h) = (info.width as usize, info.height as usize);
+        let channels = match info.color_type {
+            png::ColorType::Rgb => 3,
+            png::ColorType::Rgba => 4,
+            png::ColorType::Grayscale => 1,
+            png::ColorType::GrayscaleAlpha => 2,
+            png::ColorType::Indexed => {
+                return Err(format!(
+                    "{}: palette images are not supported",
+                    path.display()
+                ));
+            }
+        };
+        let rgb: Vec<u8> = buf[..w * h * channels]
+            .chunks_exact(channels)
+            .flat_map(|p| {
+                if channels >= 3 {
+                    [p[0], p[1], p[2]]
+                } else {
+                    [p[0]; 3]
+                }
+            })
+            .collect();
+        Ok(Light::from_frame(&Frame::packed_rgb(&rgb, w, h)))
+    }
+
+    /// The light as an 8-bit sRGB image, packed RGB, each cell a `scale` × `scale`
+    /// square: (32 × scale) × (16 × scale) pixels.
+    pub fn to_rgb_image(&self, scale: usize) -> Vec<u8> {
+        let (w, h) = (LIGHT_COLS * scale, LIGHT_ROWS * scale);
+        let n = LIGHT_ROWS * LIGHT_COLS;
+        let mut out = vec![0u8; w * h * 3];
+        for (i, pixel) in out.chunks_exact_mut(3).enumerate() {
+            let cell = (i / w / scale) * LIGHT_COLS + (i % w) / scale;
+            for (c, v) in pixel.iter_mut().enumerate() {
+                *v = linear_to_srgb_byte(self.0[c * n + cell]);
+            }
+        }
+        out
+    }
+
     /// Mean absolute difference to another light.
     pub fn distance(&self, other: &Light) -> f32 {
         self.0
@@ -132,6 +199,17 @@ fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn light_image_round_trips_through_its_srgb_bytes() {
+        let mut light = Light::uniform([0.0, 0.5, 1.0]);
+        light.0[0] = 0.25; // top-left cell's red
+        let img = light.to_rgb_image(2);
+        assert_eq!(img.len(), 64 * 32 * 3);
+        let back = Light::from_frame(&Frame::packed_rgb(&img, 64, 32));
+        assert!(back.distance(&light) < 0.003, "{}", back.distance(&light));
+        assert!((back.0[0] - 0.25).abs() < 0.003 && back.0[1].abs() < 1e-6);
+    }
 
     #[test]
     fn white_frame_is_unit_light() {

@@ -3,11 +3,13 @@
 //!
 //! An installed plugin looks in a folder `lsydrelight/` next to its own file
 //! (`<plugin dir>/lsydrelight/libonnxruntime.so`, `.../models/default`,
-//! `.../targets`); a plugin built in a checkout looks in the checkout
-//! (`target/onnxruntime/libonnxruntime.so`, made by `scripts/setup.sh`, and
-//! `models/`). `LSYDRELIGHT_ORT_LIBRARY` overrides the library's path.
+//! `.../targets`); a plugin built in a checkout looks in the checkout that holds
+//! it (`target/onnxruntime/libonnxruntime.so`, made by `scripts/setup.sh`, and
+//! `models/`), found from the plugin's file or, when it is linked into a program
+//! (tests, examples), from the program's. No path of the build machine is
+//! compiled in. `LSYDRELIGHT_ORT_LIBRARY` overrides the library's path.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 static PLUGIN_FILE: OnceLock<Option<PathBuf>> = OnceLock::new();
@@ -17,9 +19,28 @@ pub fn set_plugin_file(file: Option<PathBuf>) {
     let _ = PLUGIN_FILE.set(file);
 }
 
-/// This checkout, where a development build finds its files.
+/// The file the plugin's code was loaded from: the plugin, or the program it is linked into.
+fn own_file() -> Option<PathBuf> {
+    PLUGIN_FILE
+        .get()
+        .cloned()
+        .flatten()
+        .or_else(|| std::env::current_exe().ok())
+}
+
+/// The checkout holding the plugin's file (`<checkout>/target/<profile>/...`):
+/// the nearest folder above it with the shipped model. Else the current folder.
 fn checkout() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let is_checkout = |d: &Path| d.join("models/default/model.json").is_file();
+    own_file()
+        .and_then(|f| {
+            f.ancestors()
+                .skip(1)
+                .find(|d| is_checkout(d))
+                .map(Path::to_path_buf)
+        })
+        .or_else(|| std::env::current_dir().ok())
+        .unwrap_or_default()
 }
 
 /// `<plugin dir>/lsydrelight`, for an installed plugin.

@@ -7,23 +7,24 @@ mod support;
 use std::path::Path;
 
 use gstlsydrelight::engine::{
-    self, ContractError, EngineError, Provider, Relighter, Source, Temporal,
+    self, ContractError, EngineError, FramePolicy, Provider, Relighter, Skips, Source, Temporal,
 };
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use support::*;
 
-fn relighter(temporal: Temporal) -> Relighter {
+fn relighter(temporal: Temporal) -> FramePolicy {
     let env = engine::environment(&paths::default_ort_library())
         .expect("ONNX Runtime loads (run scripts/setup.sh)");
-    let mut r = Relighter::new(env, &default_model(), 2, Provider::Cpu, temporal)
-        .expect("the shipped model loads");
+    let network =
+        Relighter::new(env, &default_model(), 2, Provider::Cpu).expect("the shipped model loads");
+    let mut r = FramePolicy::new(network, temporal, Skips::default());
     r.set_target(&Light::uniform([0.8, 0.6, 0.4])).unwrap();
     r
 }
 
-fn image(r: &Relighter, monitor: deskstage::math::Vec3) -> Vec<f32> {
-    common::network_input(&render_face(monitor), r.resolution())
+fn image(r: &FramePolicy, monitor: deskstage::math::Vec3) -> Vec<f32> {
+    common::network_input(&render_face(monitor), r.relighter().resolution())
 }
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {
@@ -46,7 +47,7 @@ fn source_light_is_the_papers_weighted_average() {
     let mut used = Vec::new();
     for l in &lights {
         used.push(
-            r.process(&img, Source::Known(l.clone()), false)
+            r.relight(&img, Source::Known(l.clone()), false)
                 .unwrap()
                 .source,
         );
@@ -79,15 +80,15 @@ fn features_are_smoothed_exponentially() {
     });
     let a = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let b = image(&r, deskstage::math::Vec3::new(0.3, 0.3, 0.6));
-    r.process(&a, Source::Known(light.clone()), false).unwrap();
+    r.relight(&a, Source::Known(light.clone()), false).unwrap();
     let fa = r.smoothed_features().unwrap().to_vec();
     r.reset();
-    r.process(&b, Source::Known(light.clone()), false).unwrap();
+    r.relight(&b, Source::Known(light.clone()), false).unwrap();
     let fb = r.smoothed_features().unwrap().to_vec();
     r.reset();
     // f_t = α f_t + (1 − α) f_{t−1}: frame b after frame a.
-    r.process(&a, Source::Known(light.clone()), false).unwrap();
-    r.process(&b, Source::Known(light.clone()), false).unwrap();
+    r.relight(&a, Source::Known(light.clone()), false).unwrap();
+    r.relight(&b, Source::Known(light.clone()), false).unwrap();
     let fab = r.smoothed_features().unwrap();
     for (level, ((x, y), z)) in fa.iter().zip(&fb).zip(fab).enumerate() {
         let want: Vec<f32> = x
@@ -110,13 +111,13 @@ fn constant_input_converges_to_the_single_frame_result() {
     let mut fresh = relighter(Temporal::default());
     let img = image(&fresh, deskstage::math::Vec3::new(0.6, 0.6, 0.6));
     let single = fresh
-        .process(&img, Source::Known(light.clone()), false)
+        .relight(&img, Source::Known(light.clone()), false)
         .unwrap()
         .relit
         .unwrap();
     let mut r = relighter(Temporal::default());
     let other = image(&r, deskstage::math::Vec3::new(0.1, 0.1, 0.9));
-    r.process(
+    r.relight(
         &other,
         Source::Known(Light::uniform([0.1, 0.1, 0.9])),
         false,
@@ -125,7 +126,7 @@ fn constant_input_converges_to_the_single_frame_result() {
     let mut last = Vec::new();
     for _ in 0..40 {
         last = r
-            .process(&img, Source::Known(light.clone()), false)
+            .relight(&img, Source::Known(light.clone()), false)
             .unwrap()
             .relit
             .unwrap();
@@ -145,7 +146,7 @@ fn unknown_source_uses_the_predicted_light() {
         average_frames: 1,
     });
     let img = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
-    let out = r.process(&img, Source::Unknown, false).unwrap();
+    let out = r.relight(&img, Source::Unknown, false).unwrap();
     let predicted = out.predicted.expect("unknown source predicts");
     assert_eq!(
         out.source, predicted,
@@ -154,7 +155,7 @@ fn unknown_source_uses_the_predicted_light() {
     assert!(predicted.0.iter().all(|v| (0.0..=1.0).contains(v)));
     assert_eq!(r.counts().predictions, 1);
     let known = r
-        .process(&img, Source::Known(Light::uniform([1.0; 3])), false)
+        .relight(&img, Source::Known(Light::uniform([1.0; 3])), false)
         .unwrap();
     assert!(
         known.predicted.is_none(),
@@ -172,7 +173,7 @@ fn copy_model(to: &Path) {
 
 fn load(dir: &Path) -> Result<Relighter, EngineError> {
     let env = engine::environment(&paths::default_ort_library()).unwrap();
-    Relighter::new(env, dir, 1, Provider::Cpu, Temporal::default())
+    Relighter::new(env, dir, 1, Provider::Cpu)
 }
 
 fn edit_manifest(dir: &Path, edit: impl FnOnce(&mut serde_json::Value)) {

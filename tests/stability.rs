@@ -5,22 +5,16 @@
 mod support;
 
 use deskstage::math::Vec3;
-use gstlsydrelight::engine::{self, Provider, Relighter, Source, Temporal};
+use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use support::*;
 
-fn relighter(threads: usize) -> Relighter {
+fn relighter(threads: usize) -> FramePolicy {
     let env = engine::environment(&paths::default_ort_library())
         .expect("ONNX Runtime loads (run scripts/setup.sh)");
-    let mut r = Relighter::new(
-        env,
-        &default_model(),
-        threads,
-        Provider::Cpu,
-        Temporal::default(),
-    )
-    .unwrap();
+    let network = Relighter::new(env, &default_model(), threads, Provider::Cpu).unwrap();
+    let mut r = FramePolicy::new(network, Temporal::default(), Skips::default());
     r.set_target(&Light::uniform([0.9, 0.7, 0.5])).unwrap();
     r
 }
@@ -55,7 +49,7 @@ fn assert_sane(relit: &[f32], what: &str) {
 #[test]
 fn long_runs_stay_finite_flat_and_without_drift() {
     let mut r = relighter(2);
-    let res = r.resolution();
+    let res = r.relighter().resolution();
     let faces: Vec<Vec<f32>> = [
         Vec3::new(1.0, 1.0, 1.0),
         Vec3::new(0.2, 0.3, 0.9),
@@ -69,12 +63,12 @@ fn long_runs_stay_finite_flat_and_without_drift() {
         Light::uniform([0.2, 0.3, 0.9]),
         Light::uniform([0.9, 0.5, 0.1]),
     ];
-    let probe = |r: &mut Relighter| -> Vec<f32> {
+    let probe = |r: &mut FramePolicy| -> Vec<f32> {
         // A constant stretch: the smoothed state settles to the same fixed point every time.
         let mut out = Vec::new();
         for _ in 0..60 {
             out = r
-                .process(&faces[0], Source::Known(lights[0].clone()), false)
+                .relight(&faces[0], Source::Known(lights[0].clone()), false)
                 .unwrap()
                 .relit
                 .unwrap();
@@ -87,7 +81,7 @@ fn long_runs_stay_finite_flat_and_without_drift() {
         for i in 0..500 {
             let k = (i * 7 + block) % 3;
             let out = r
-                .process(
+                .relight(
                     &faces[k],
                     Source::Known(lights[(i / 3) % 3].clone()),
                     i % 50 == 0,
@@ -117,7 +111,7 @@ fn long_runs_stay_finite_flat_and_without_drift() {
 #[test]
 fn extreme_faces_and_flat_regions_stay_finite() {
     let mut r = relighter(2);
-    let res = r.resolution();
+    let res = r.relighter().resolution();
     let mut noise = Vec::with_capacity(3 * res * res);
     let mut seed = 1u64;
     for _ in 0..3 * res * res {
@@ -143,7 +137,7 @@ fn extreme_faces_and_flat_regions_stay_finite() {
             Source::Unknown,
         ] {
             r.reset();
-            let out = r.process(img, source, true).unwrap();
+            let out = r.relight(img, source, true).unwrap();
             assert_sane(out.relit.as_ref().expect("finite output"), name);
             assert!(out.predicted.unwrap().is_finite());
         }
@@ -153,7 +147,7 @@ fn extreme_faces_and_flat_regions_stay_finite() {
 #[test]
 fn strobing_monitor_stays_bounded() {
     let mut r = relighter(2);
-    let face = common::network_input(face_rgb(), r.resolution());
+    let face = common::network_input(face_rgb(), r.relighter().resolution());
     let (black, white) = (Light::uniform([0.0; 3]), Light::uniform([1.0; 3]));
     let mut previous: Option<Vec<f32>> = None;
     let mut biggest_step = 0.0f32;
@@ -164,7 +158,7 @@ fn strobing_monitor_stays_bounded() {
             white.clone()
         };
         let out = r
-            .process(&face, Source::Known(light), false)
+            .relight(&face, Source::Known(light), false)
             .unwrap()
             .relit
             .unwrap();
@@ -189,19 +183,19 @@ fn strobing_monitor_stays_bounded() {
 #[test]
 fn target_equal_to_source_changes_little() {
     let mut r = relighter(2);
-    let res = r.resolution();
+    let res = r.relighter().resolution();
     let light = Light::uniform([0.8, 0.8, 0.8]);
     let face = common::network_input(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
     r.set_target(&light).unwrap();
     let same = r
-        .process(&face, Source::Known(light.clone()), false)
+        .relight(&face, Source::Known(light.clone()), false)
         .unwrap()
         .relit
         .unwrap();
     r.reset();
     r.set_target(&Light::uniform([0.1, 0.1, 0.6])).unwrap();
     let other = r
-        .process(&face, Source::Known(light), false)
+        .relight(&face, Source::Known(light), false)
         .unwrap()
         .relit
         .unwrap();
@@ -220,14 +214,14 @@ fn target_equal_to_source_changes_little() {
 fn identical_input_gives_identical_output() {
     let run = |threads: usize| {
         let mut r = relighter(threads);
-        let res = r.resolution();
+        let res = r.relighter().resolution();
         let faces = [
             common::network_input(face_rgb(), res),
             common::network_input(&render_face(Vec3::new(0.3, 0.3, 0.8)), res),
         ];
         (0..6)
             .map(|i| {
-                r.process(
+                r.relight(
                     &faces[i % 2],
                     Source::Known(Light::uniform([0.1 * i as f32; 3])),
                     true,

@@ -1,11 +1,18 @@
 //! The inference engine, independent of GStreamer: the model contract, ONNX
-//! Runtime, the paper's temporal filters and the per-stream relighter.
+//! Runtime, the network's stage chain, the paper's temporal filters and the
+//! per-frame policy that decides what each frame of a stream gets.
 
 pub mod contract;
+pub mod policy;
 pub mod relighter;
 pub mod runtime;
 pub mod temporal;
 
 pub use contract::{ContractError, Manifest};
-pub use relighter::{EngineCounts, FrameOutput, Relighter, Source, Temporal};
+pub use policy::{
+    Action, FrameOutput, FramePolicy, FrameRequest, Outcome, PassThrough, PolicyCounts, Reuse,
+    Skips, Source,
+};
+pub use relighter::Relighter;
 pub use runtime::{EngineError, Provider, environment};
+pub use temporal::Temporal;

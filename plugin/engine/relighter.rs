@@ -1,17 +1,15 @@
-//! The stateful relighting engine: one per video stream.
+//! The network's stage chain: the model's ONNX sessions, run in the order the
+//! contract allows. It holds no state from frame to frame; the stream's state
+//! (averaged lights, smoothed features, the last relighting) is the per-frame
+//! policy's ([`super::policy`]).
 //!
-//! Per frame it runs the model's stages in the order the contract allows:
-//!
-//! 1. `encoder`: image → stem and raw features e1..e7;
-//! 2. `light_decoder` (only when the source light is unknown or a prediction
-//!    is wanted): e2, e4, e6 → predicted source light;
-//! 3. the source light is averaged over the last N frames and encoded by
-//!    `light_encoder`;
-//! 4. `delight`: e1..e7 and the source code → de-lit features f1..f7,
-//!    which are smoothed with the previous frame's;
-//! 5. `decoder`: f1..f7, stem and the target code → the relit image.
-//!
-//! The target light's code is computed once per target, not per frame.
+//! 1. `encoder`: image → stem and raw features e1..e7 ([`Relighter::encode`]);
+//! 2. `light_decoder`: e2, e4, e6 → predicted source light ([`Relighter::predict_light`]);
+//! 3. `light_encoder`: a light → its code ([`Relighter::encode_light`]);
+//! 4. `delight`: e1..e7 and the source code → de-lit features f1..f7, which the
+//!    caller may change in place (the paper smooths them over time);
+//! 5. `decoder`: f1..f7, stem and the target code → the relit image
+//!    ([`Relighter::relight`] runs 4 and 5).
 
 use std::path::Path;
 use std::time::Instant;
@@ -22,74 +20,42 @@ use ort::value::{DynValue, TensorRef};
 
 use super::contract::{CODE_DIM, Manifest, PRESENCE_SIZE, RAW, SMOOTHED};
 use super::runtime::{EngineError, Provider, Sessions, inference, load_model};
-use super::temporal::{FeatureSmoother, SourceLightAverager};
 use crate::light::{LIGHT_COLS, LIGHT_LEN, LIGHT_ROWS, Light};
 
-/// Parameters of the paper's temporal filters.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Temporal {
-    /// Feature smoothing α; 1 turns smoothing off.
-    pub alpha: f32,
-    /// Source-light averaging β and frame count N; N = 1 turns averaging off.
-    pub beta: f32,
-    pub average_frames: usize,
+/// A frame through the encoder: what the later stages take.
+pub struct Encoded {
+    stem: DynValue,
+    /// e1..e7.
+    raw: Vec<DynValue>,
 }
 
-impl Default for Temporal {
-    fn default() -> Self {
-        Temporal {
-            alpha: super::temporal::DEFAULT_ALPHA,
-            beta: super::temporal::DEFAULT_BETA,
-            average_frames: super::temporal::DEFAULT_AVERAGE_FRAMES,
-        }
-    }
+/// What the de-lit features' hook saw.
+pub enum Relit {
+    /// Planar sRGB in [0, 1], 3 × R × R.
+    Image(Vec<f32>),
+    /// The de-lit features or the image held NaN or Inf; the hook was not called
+    /// when the features were the broken ones.
+    NonFinite,
 }
 
-/// Where this frame's source light comes from.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Source {
-    /// The monitor's content at the frame's time.
-    Known(Light),
-    /// Nothing is known: the network predicts it (unknown-source mode).
-    Unknown,
-}
-
-/// The result of one frame.
-#[derive(Clone, Debug)]
-pub struct FrameOutput {
-    /// Planar sRGB in [0, 1], 3 × R × R; None when the model produced NaN or Inf.
-    pub relit: Option<Vec<f32>>,
-    /// The predicted source monitor light, when it was computed.
-    pub predicted: Option<Light>,
-    /// The (averaged) source light the frame was de-lit with.
-    pub source: Light,
-}
-
-/// Work done, for statistics.
+/// Seconds inside ONNX Runtime, every stage, for statistics.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct EngineCounts {
-    pub target_encodes: u64,
-    pub predictions: u64,
-    pub non_finite: u64,
-    /// Seconds inside ONNX Runtime, every stage.
-    pub network_seconds: f64,
-    /// Seconds spent averaging source lights and smoothing features.
-    pub filter_seconds: f64,
+pub struct NetworkTime {
+    pub seconds: f64,
 }
 
 pub struct Relighter {
     manifest: Manifest,
     sessions: Sessions,
-    averager: SourceLightAverager,
-    smoother: FeatureSmoother,
-    target: Option<(Light, Vec<f32>)>,
-    /// The source light of the last frame that ran the network, before averaging.
-    last_source: Option<Light>,
-    counts: EngineCounts,
+    time: NetworkTime,
 }
 
 fn tensor<'a>(shape: [usize; 4], data: &'a [f32]) -> Result<TensorRef<'a, f32>, EngineError> {
     TensorRef::from_array_view((shape, data)).map_err(inference)
+}
+
+fn tensor_code(code: &[f32]) -> Result<TensorRef<'_, f32>, EngineError> {
+    TensorRef::from_array_view(([1usize, CODE_DIM], code)).map_err(inference)
 }
 
 fn take(outputs: &mut ort::session::SessionOutputs, name: &str) -> Result<DynValue, EngineError> {
@@ -105,22 +71,11 @@ fn values(v: &DynValue) -> Result<&[f32], EngineError> {
 }
 
 /// Runs `body`, adding its wall time to `seconds`.
-fn timed<T>(seconds: &mut f64, body: impl FnOnce() -> T) -> T {
+pub(crate) fn timed<T>(seconds: &mut f64, body: impl FnOnce() -> T) -> T {
     let start = Instant::now();
     let out = body();
     *seconds += start.elapsed().as_secs_f64();
     out
-}
-
-fn light_of(v: &DynValue) -> Result<Light, EngineError> {
-    let d = values(v)?;
-    if d.len() != LIGHT_LEN {
-        return Err(EngineError::Inference(format!(
-            "predicted light has {} values, not {LIGHT_LEN}",
-            d.len()
-        )));
-    }
-    Ok(Light(d.to_vec()))
 }
 
 impl Relighter {
@@ -129,17 +84,12 @@ impl Relighter {
         model: &Path,
         threads: usize,
         provider: Provider,
-        temporal: Temporal,
     ) -> Result<Relighter, EngineError> {
         let (manifest, sessions) = load_model(env, model, threads, provider)?;
         Ok(Relighter {
             manifest,
             sessions,
-            averager: SourceLightAverager::new(temporal.beta, temporal.average_frames),
-            smoother: FeatureSmoother::new(temporal.alpha),
-            target: None,
-            last_source: None,
-            counts: EngineCounts::default(),
+            time: NetworkTime::default(),
         })
     }
 
@@ -152,44 +102,8 @@ impl Relighter {
         self.manifest.resolution
     }
 
-    pub fn counts(&self) -> EngineCounts {
-        self.counts
-    }
-
-    /// Forgets everything learnt from past frames: averaged lights and smoothed features.
-    pub fn reset(&mut self) {
-        self.averager.reset();
-        self.smoother.reset();
-        self.last_source = None;
-    }
-
-    /// The target light, if one is set.
-    pub fn target(&self) -> Option<&Light> {
-        self.target.as_ref().map(|(l, _)| l)
-    }
-
-    /// The source light the next frame would be de-lit with, if its own is `source`
-    /// (the last frame's own light when unknown), without changing any state.
-    pub fn peek_average(&self, source: &Source) -> Option<Light> {
-        let light = match source {
-            Source::Known(l) => l.clone(),
-            Source::Unknown => self.last_source.clone()?,
-        };
-        Some(self.averager.clone().push(light))
-    }
-
-    /// Accounts for a frame whose relighting was reused instead of computed: its
-    /// source light joins the average, and the smoothed features advance as if the
-    /// last frame's had been seen again, which is what a static scene gives.
-    pub fn skip_frame(&mut self, source: &Source) {
-        let light = match source {
-            Source::Known(l) => Some(l.clone()),
-            Source::Unknown => self.last_source.clone(),
-        };
-        if let Some(l) = light {
-            self.averager.push(l);
-        }
-        self.smoother.repeat_last();
+    pub fn time(&self) -> NetworkTime {
+        self.time
     }
 
     /// Whether the model can tell if the person is in view.
@@ -204,7 +118,7 @@ impl Relighter {
             return Ok(None);
         };
         let input = tensor([1, 3, PRESENCE_SIZE, PRESENCE_SIZE], image)?;
-        let mut out = timed(&mut self.counts.network_seconds, || {
+        let mut out = timed(&mut self.time.seconds, || {
             session.run(ort::inputs!["image" => input])
         })
         .map_err(inference)?;
@@ -212,47 +126,14 @@ impl Relighter {
         Ok(Some(1.0 / (1.0 + (-logit).exp())))
     }
 
-    /// Changes the temporal filters; their state starts afresh.
-    pub fn set_temporal(&mut self, t: Temporal) {
-        self.averager = SourceLightAverager::new(t.beta, t.average_frames);
-        self.smoother = FeatureSmoother::new(t.alpha);
-    }
-
-    /// Whether the next frame will be smoothed with a previous one.
-    pub fn has_history(&self) -> bool {
-        self.smoother.has_state()
-    }
-
-    /// The last frame's de-lit features f1..f7 after smoothing.
-    pub fn smoothed_features(&self) -> Option<&[Vec<f32>]> {
-        self.smoother.state()
-    }
-
     /// The code of a light.
     pub fn encode_light(&mut self, light: &Light) -> Result<Vec<f32>, EngineError> {
         let session = &mut self.sessions.light_encoder;
-        timed(&mut self.counts.network_seconds, || encode(session, light))
+        timed(&mut self.time.seconds, || encode_light(session, light))
     }
 
-    /// Sets the target light; its code is computed here, once, and reused every frame.
-    pub fn set_target(&mut self, light: &Light) -> Result<(), EngineError> {
-        if self.target.as_ref().is_some_and(|(l, _)| l == light) {
-            return Ok(());
-        }
-        let code = self.encode_light(light)?;
-        self.counts.target_encodes += 1;
-        self.target = Some((light.clone(), code));
-        Ok(())
-    }
-
-    /// Relights one frame: `image` is planar sRGB in [0, 1], 3 × R × R.
-    /// The light decoder runs when the source is unknown or `want_prediction`.
-    pub fn process(
-        &mut self,
-        image: &[f32],
-        source: Source,
-        want_prediction: bool,
-    ) -> Result<FrameOutput, EngineError> {
+    /// The encoder: `image` is planar sRGB in [0, 1], 3 × R × R.
+    pub fn encode(&mut self, image: &[f32]) -> Result<Encoded, EngineError> {
         let r = self.manifest.resolution;
         if image.len() != 3 * r * r {
             return Err(EngineError::Inference(format!(
@@ -260,52 +141,53 @@ impl Relighter {
                 image.len()
             )));
         }
-        let target_code = match &self.target {
-            Some((_, code)) => code.clone(),
-            None => return Err(EngineError::Inference("no target light is set".into())),
-        };
-        let network = &mut self.counts.network_seconds;
         let input = tensor([1, 3, r, r], image)?;
         let encoder = &mut self.sessions.encoder;
-        let mut enc =
-            timed(network, || encoder.run(ort::inputs!["image" => input])).map_err(inference)?;
-        let stem = take(&mut enc, "stem")?;
-        let raw: Vec<DynValue> = RAW
+        let mut out = timed(&mut self.time.seconds, || {
+            encoder.run(ort::inputs!["image" => input])
+        })
+        .map_err(inference)?;
+        let stem = take(&mut out, "stem")?;
+        let raw = RAW
             .iter()
-            .map(|n| take(&mut enc, n))
+            .map(|n| take(&mut out, n))
             .collect::<Result<_, _>>()?;
-        drop(enc);
+        Ok(Encoded { stem, raw })
+    }
 
-        let predicted = if want_prediction || source == Source::Unknown {
-            self.counts.predictions += 1;
-            let decoder = &mut self.sessions.light_decoder;
-            let mut out = timed(network, || {
-                decoder.run(ort::inputs!["e2" => &raw[1], "e4" => &raw[3], "e6" => &raw[5]])
-            })
-            .map_err(inference)?;
-            Some(light_of(&take(&mut out, "predicted_light")?)?)
-        } else {
-            None
-        };
-        let this_source = match source {
-            Source::Known(l) => l,
-            Source::Unknown => predicted.clone().expect("predicted above"),
-        };
-        if !this_source.is_finite() {
-            // A broken prediction must neither light this frame nor enter the average.
-            return Ok(self.non_finite(predicted, this_source));
+    /// The light decoder: the source light predicted from the face.
+    pub fn predict_light(&mut self, encoded: &Encoded) -> Result<Light, EngineError> {
+        let raw = &encoded.raw;
+        let decoder = &mut self.sessions.light_decoder;
+        let mut out = timed(&mut self.time.seconds, || {
+            decoder.run(ort::inputs!["e2" => &raw[1], "e4" => &raw[3], "e6" => &raw[5]])
+        })
+        .map_err(inference)?;
+        let v = take(&mut out, "predicted_light")?;
+        let d = values(&v)?;
+        if d.len() != LIGHT_LEN {
+            return Err(EngineError::Inference(format!(
+                "predicted light has {} values, not {LIGHT_LEN}",
+                d.len()
+            )));
         }
-        self.last_source = Some(this_source.clone());
-        let averaged = timed(&mut self.counts.filter_seconds, || {
-            self.averager.push(this_source)
-        });
-        let network = &mut self.counts.network_seconds;
-        let light_encoder = &mut self.sessions.light_encoder;
-        let source_code = timed(network, || encode(light_encoder, &averaged))?;
+        Ok(Light(d.to_vec()))
+    }
 
-        let source_code = tensor_code(&source_code)?;
+    /// De-lights the encoded frame with `source_code`, lets `features` change the
+    /// de-lit features f1..f7 in place (only when they are finite), and decodes them
+    /// relit with `target_code`.
+    pub fn relight(
+        &mut self,
+        encoded: &Encoded,
+        source_code: &[f32],
+        target_code: &[f32],
+        features: impl FnOnce(&mut [&mut [f32]]),
+    ) -> Result<Relit, EngineError> {
+        let raw = &encoded.raw;
+        let source_code = tensor_code(source_code)?;
         let delight = &mut self.sessions.delight;
-        let mut delit_out = timed(network, || {
+        let mut delit_out = timed(&mut self.time.seconds, || {
             delight.run(ort::inputs![
                 "e1" => &raw[0], "e2" => &raw[1], "e3" => &raw[2], "e4" => &raw[3],
                 "e5" => &raw[4], "e6" => &raw[5], "e7" => &raw[6],
@@ -318,13 +200,11 @@ impl Relighter {
             .map(|n| take(&mut delit_out, n))
             .collect::<Result<_, _>>()?;
         drop(delit_out);
-
         let finite = delit
             .iter()
             .all(|v| values(v).is_ok_and(|d| d.iter().all(|x| x.is_finite())));
         if !finite {
-            // Keep NaN out of the smoothing state.
-            return Ok(self.non_finite(predicted, averaged));
+            return Ok(Relit::NonFinite);
         }
         {
             let mut slices: Vec<&mut [f32]> = delit
@@ -335,53 +215,30 @@ impl Relighter {
                         .map_err(inference)
                 })
                 .collect::<Result<_, _>>()?;
-            let smoother = &mut self.smoother;
-            timed(&mut self.counts.filter_seconds, || {
-                smoother.smooth(&mut slices)
-            });
+            features(&mut slices);
         }
-
-        let target_code = tensor_code(&target_code)?;
+        let target_code = tensor_code(target_code)?;
         let decoder = &mut self.sessions.decoder;
-        let mut dec = timed(&mut self.counts.network_seconds, || {
+        let stem = &encoded.stem;
+        let mut dec = timed(&mut self.time.seconds, || {
             decoder.run(ort::inputs![
                 "f1" => &delit[0], "f2" => &delit[1], "f3" => &delit[2], "f4" => &delit[3],
                 "f5" => &delit[4], "f6" => &delit[5], "f7" => &delit[6],
-                "stem" => &stem,
+                "stem" => stem,
                 "target_code" => target_code,
             ])
         })
         .map_err(inference)?;
         let relit = values(&take(&mut dec, "relit")?)?.to_vec();
-        drop(dec);
-        if !relit.iter().all(|v| v.is_finite()) {
-            return Ok(self.non_finite(predicted, averaged));
-        }
-        Ok(FrameOutput {
-            relit: Some(relit),
-            predicted: predicted.filter(Light::is_finite),
-            source: averaged,
+        Ok(if relit.iter().all(|v| v.is_finite()) {
+            Relit::Image(relit)
+        } else {
+            Relit::NonFinite
         })
     }
-
-    /// The output of a frame the model broke on (NaN or Inf): nothing relit, and
-    /// the temporal state starts afresh with the next frame.
-    fn non_finite(&mut self, predicted: Option<Light>, source: Light) -> FrameOutput {
-        self.counts.non_finite += 1;
-        self.reset();
-        FrameOutput {
-            relit: None,
-            predicted: predicted.filter(Light::is_finite),
-            source,
-        }
-    }
 }
 
-fn tensor_code(code: &[f32]) -> Result<TensorRef<'_, f32>, EngineError> {
-    TensorRef::from_array_view(([1usize, CODE_DIM], code)).map_err(inference)
-}
-
-fn encode(session: &mut Session, light: &Light) -> Result<Vec<f32>, EngineError> {
+fn encode_light(session: &mut Session, light: &Light) -> Result<Vec<f32>, EngineError> {
     let mut out = session
         .run(ort::inputs!["light" => tensor([1, 3, LIGHT_ROWS, LIGHT_COLS], &light.0)?])
         .map_err(inference)?;

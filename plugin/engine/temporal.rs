@@ -13,6 +13,26 @@ pub const DEFAULT_BETA: f32 = 0.6;
 pub const DEFAULT_AVERAGE_FRAMES: usize = 3;
 pub const DEFAULT_ALPHA: f32 = 0.7;
 
+/// Parameters of the two filters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Temporal {
+    /// Feature smoothing α; 1 turns smoothing off.
+    pub alpha: f32,
+    /// Source-light averaging β and frame count N; N = 1 turns averaging off.
+    pub beta: f32,
+    pub average_frames: usize,
+}
+
+impl Default for Temporal {
+    fn default() -> Self {
+        Temporal {
+            alpha: DEFAULT_ALPHA,
+            beta: DEFAULT_BETA,
+            average_frames: DEFAULT_AVERAGE_FRAMES,
+        }
+    }
+}
+
 /// Weighted mean of the last N source lights, the newest weighted most.
 #[derive(Clone, Debug)]
 pub struct SourceLightAverager {

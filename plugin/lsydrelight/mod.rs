@@ -50,6 +50,13 @@ use gst::glib;
 use gst::prelude::*;
 
 mod imp;
+mod monitor;
+mod qos;
+mod settings;
+mod side_stream;
+mod stats;
+mod target;
+mod video;
 
 pub use imp::MONITOR_TIMESTAMP_CAPS;
 

@@ -1,0 +1,495 @@
+//! The per-frame policy: what happens to each face frame of one video stream,
+//! and the state the stream carries from frame to frame.
+//!
+//! Given a frame, its face region, its source light and whether it is already
+//! late, [`FramePolicy::process`] decides and carries out one of:
+//!
+//! - **pass through**, untouched: the region is too dark to carry light to change
+//!   (black frames stay black), nobody is in view, the source light already is the
+//!   target, or the network broke (NaN/Inf);
+//! - **reuse** the last relighting: the frame is late (QoS), or the scene is static;
+//! - **relight**: run the network, with the paper's temporal filters (source-light
+//!   averaging and de-lit feature smoothing, [`super::temporal`]).
+//!
+//! Its [`Outcome`] names the action, why, and the lighting change to paste onto
+//! the frame. The temporal state is forgotten in one place, [`FramePolicy::reset`].
+//! No GStreamer here: the element wires frames to it.
+
+use std::fmt;
+
+use super::relighter::{Relighter, Relit, timed};
+use super::runtime::EngineError;
+use super::temporal::{FeatureSmoother, SourceLightAverager, Temporal};
+use crate::engine::contract::PRESENCE_SIZE;
+use crate::frame::{Crop, Frame, LightingChange, mean_luma, sample_crop};
+use crate::light::Light;
+
+/// Where this frame's source light comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Source {
+    /// The monitor's content at the frame's time.
+    Known(Light),
+    /// Nothing is known: the network predicts it (unknown-source mode).
+    Unknown,
+}
+
+/// Mean sRGB luma of the face region below which a frame carries no light to
+/// change: camera start-up, fades and cuts to black. Relighting such a frame can
+/// only invent light (a ghost of the face the network has learnt), so it passes.
+pub const DARK_LEVEL: f32 = 0.03;
+
+/// The scene-adaptive skips and their thresholds (the element's properties).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Skips {
+    /// Reuse the last relighting while the face region and light barely change.
+    pub skip_static: bool,
+    /// Mean absolute change of the network's input (sRGB, [0, 1]) that counts as static.
+    pub static_threshold: f32,
+    /// Mean absolute change of the averaged source light (linear) that counts as unchanged.
+    pub static_light_threshold: f32,
+    /// Pass through when the source light is the target light.
+    pub skip_same_light: bool,
+    /// Mean absolute difference (linear) under which source and target are the same.
+    pub same_light_tolerance: f32,
+    /// Pass through while the presence stage sees nobody.
+    pub skip_absent: bool,
+    pub presence_threshold: f32,
+}
+
+impl Default for Skips {
+    // From the benchmark's skip table (README, "Skipping what a scene does not need"):
+    // each skip is on where it pays. The static skip never fired on a webcam
+    // recording (sensor noise exceeds its threshold), so it is off.
+    fn default() -> Self {
+        Skips {
+            skip_static: false,
+            static_threshold: 0.004,
+            static_light_threshold: 0.002,
+            skip_same_light: true,
+            same_light_tolerance: 0.004,
+            skip_absent: true,
+            presence_threshold: 0.5,
+        }
+    }
+}
+
+/// One face frame, as the policy needs it.
+pub struct FrameRequest<'a> {
+    pub frame: &'a Frame<'a>,
+    /// The face region.
+    pub crop: Crop,
+    pub source: Source,
+    /// Already past its deadline: reuse the last relighting if there is one.
+    pub late: bool,
+    /// Predict the source light even when it is known (someone shows the prediction).
+    pub want_prediction: bool,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reuse {
+    /// The face region and the source light barely changed.
+    Static,
+    /// The frame is already late (QoS).
+    Late,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PassThrough {
+    /// The face region is too dark to carry light ([`DARK_LEVEL`]).
+    Dark,
+    /// The presence stage sees nobody.
+    Absent,
+    /// The source light is the target light.
+    SameLight,
+    /// The network produced NaN or Inf.
+    NonFinite,
+}
+
+/// What was done with a frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Action {
+    Relit,
+    Reused(Reuse),
+    PassedThrough(PassThrough),
+}
+
+/// The result of one frame.
+pub struct Outcome<'a> {
+    pub action: Action,
+    /// The lighting change to paste onto the frame's face region; None leaves it as it is.
+    pub change: Option<&'a LightingChange>,
+    /// The predicted source monitor light, when there is one for this frame.
+    pub predicted: Option<Light>,
+    /// What the decision was based on, for the debug log.
+    pub luma: f32,
+    pub presence: Option<f32>,
+}
+
+impl fmt::Display for Outcome<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.action {
+            Action::Relit => write!(f, "relit by the network"),
+            Action::Reused(Reuse::Late) => {
+                write!(f, "reused the last relighting: the frame is late (QoS)")
+            }
+            Action::Reused(Reuse::Static) => write!(
+                f,
+                "reused the last relighting: the face region and light barely changed"
+            ),
+            Action::PassedThrough(PassThrough::Dark) => write!(
+                f,
+                "passed through: the face region is dark (mean luma {:.3} < {DARK_LEVEL})",
+                self.luma
+            ),
+            Action::PassedThrough(PassThrough::Absent) => write!(
+                f,
+                "passed through: nobody in view (presence {:.2})",
+                self.presence.unwrap_or(0.0)
+            ),
+            Action::PassedThrough(PassThrough::SameLight) => {
+                write!(f, "passed through: the source light is the target light")
+            }
+            Action::PassedThrough(PassThrough::NonFinite) => write!(
+                f,
+                "passed through: the network produced NaN or Inf; temporal state reset"
+            ),
+        }
+    }
+}
+
+/// The network's result for one image, with the stream's temporal state.
+#[derive(Clone, Debug)]
+pub struct FrameOutput {
+    /// Planar sRGB in [0, 1], 3 × R × R; None when the model produced NaN or Inf.
+    pub relit: Option<Vec<f32>>,
+    /// The predicted source monitor light, when it was computed.
+    pub predicted: Option<Light>,
+    /// The (averaged) source light the frame was de-lit with.
+    pub source: Light,
+}
+
+/// Work done and time spent, for statistics.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PolicyCounts {
+    pub relit: u64,
+    pub reused_static: u64,
+    pub reused_late: u64,
+    pub passed_dark: u64,
+    pub passed_absent: u64,
+    pub passed_same_light: u64,
+    pub passed_non_finite: u64,
+    /// Resets that forgot something.
+    pub resets: u64,
+    pub target_encodes: u64,
+    pub predictions: u64,
+    /// Seconds inside ONNX Runtime, every stage.
+    pub network_seconds: f64,
+    /// Seconds averaging source lights and smoothing features.
+    pub filter_seconds: f64,
+    /// Seconds reading the face region into the network's input.
+    pub crop_seconds: f64,
+}
+
+/// What a relit frame leaves for the frames that reuse it.
+struct Processed {
+    /// The network's input and the averaged source light.
+    image: Vec<f32>,
+    average: Light,
+    change: LightingChange,
+    crop: Crop,
+    predicted: Option<Light>,
+}
+
+pub struct FramePolicy {
+    relighter: Relighter,
+    temporal: Temporal,
+    skips: Skips,
+    averager: SourceLightAverager,
+    smoother: FeatureSmoother,
+    /// The target light and its code, computed once per target.
+    target: Option<(Light, Vec<f32>)>,
+    /// The source light of the last frame that ran the network, before averaging.
+    last_source: Option<Light>,
+    last: Option<Processed>,
+    counts: PolicyCounts,
+}
+
+/// Mean absolute difference of two images of the same size.
+fn mean_abs_diff(a: &[f32], b: &[f32]) -> f32 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f32>() / a.len() as f32
+}
+
+impl FramePolicy {
+    pub fn new(relighter: Relighter, temporal: Temporal, skips: Skips) -> FramePolicy {
+        FramePolicy {
+            relighter,
+            temporal,
+            skips,
+            averager: SourceLightAverager::new(temporal.beta, temporal.average_frames),
+            smoother: FeatureSmoother::new(temporal.alpha),
+            target: None,
+            last_source: None,
+            last: None,
+            counts: PolicyCounts::default(),
+        }
+    }
+
+    pub fn relighter(&self) -> &Relighter {
+        &self.relighter
+    }
+
+    pub fn counts(&self) -> PolicyCounts {
+        PolicyCounts {
+            network_seconds: self.relighter.time().seconds,
+            ..self.counts
+        }
+    }
+
+    /// Forgets everything learnt from past frames: averaged lights, smoothed features
+    /// and the last relighting. Returns whether there was anything to forget (only
+    /// such resets are counted).
+    pub fn reset(&mut self) -> bool {
+        let had_state = self.smoother.has_state() || !self.averager.is_empty();
+        self.averager.reset();
+        self.smoother.reset();
+        self.last_source = None;
+        self.last = None;
+        if had_state {
+            self.counts.resets += 1;
+        }
+        had_state
+    }
+
+    /// Changes the temporal filters; their state starts afresh.
+    pub fn set_temporal(&mut self, temporal: Temporal) {
+        if temporal != self.temporal {
+            self.temporal = temporal;
+            self.averager = SourceLightAverager::new(temporal.beta, temporal.average_frames);
+            self.smoother = FeatureSmoother::new(temporal.alpha);
+            self.last = None;
+        }
+    }
+
+    pub fn set_skips(&mut self, skips: Skips) {
+        self.skips = skips;
+    }
+
+    /// The target light, if one is set.
+    pub fn target(&self) -> Option<&Light> {
+        self.target.as_ref().map(|(l, _)| l)
+    }
+
+    /// Sets the target light; its code is computed here, once, and reused every frame.
+    pub fn set_target(&mut self, light: &Light) -> Result<(), EngineError> {
+        if self.target().is_some_and(|l| l == light) {
+            return Ok(());
+        }
+        let code = self.relighter.encode_light(light)?;
+        self.counts.target_encodes += 1;
+        self.target = Some((light.clone(), code));
+        self.last = None;
+        Ok(())
+    }
+
+    /// The last frame's de-lit features f1..f7 after smoothing.
+    pub fn smoothed_features(&self) -> Option<&[Vec<f32>]> {
+        self.smoother.state()
+    }
+
+    /// Decides what happens to one frame and does it, but for pasting the
+    /// returned change onto the frame.
+    pub fn process(&mut self, request: FrameRequest) -> Result<Outcome<'_>, EngineError> {
+        let FrameRequest {
+            frame,
+            crop,
+            source,
+            late,
+            want_prediction,
+        } = request;
+        let res = self.relighter.resolution();
+        let image = timed(&mut self.counts.crop_seconds, || {
+            sample_crop(frame, crop, res)
+        });
+        let luma = mean_luma(&image);
+        let passed = |action, presence| Outcome {
+            action: Action::PassedThrough(action),
+            change: None,
+            predicted: None,
+            luma,
+            presence,
+        };
+        if luma < DARK_LEVEL {
+            // The person (or the picture) will have changed by the time there is
+            // light again: nothing from before carries over.
+            self.counts.passed_dark += 1;
+            self.reset();
+            return Ok(passed(PassThrough::Dark, None));
+        }
+        let mut presence = None;
+        if self.skips.skip_absent && self.relighter.has_presence() {
+            let small = timed(&mut self.counts.crop_seconds, || {
+                sample_crop(frame, crop, PRESENCE_SIZE)
+            });
+            presence = self.relighter.presence(&small)?;
+            if presence.is_some_and(|p| p < self.skips.presence_threshold) {
+                self.counts.passed_absent += 1;
+                self.reset();
+                return Ok(passed(PassThrough::Absent, presence));
+            }
+        }
+        let average = self.peek_average(&source);
+        // Only a known source light can be compared: a predicted one comes from the
+        // frame, so it must be predicted afresh each time.
+        if self.skips.skip_same_light
+            && matches!(source, Source::Known(_))
+            && let (Some(avg), Some(target)) = (&average, self.target())
+            && avg.distance(target) <= self.skips.same_light_tolerance
+        {
+            self.counts.passed_same_light += 1;
+            self.skip_frame(&source);
+            return Ok(Outcome {
+                predicted: self.last.as_ref().and_then(|l| l.predicted.clone()),
+                ..passed(PassThrough::SameLight, presence)
+            });
+        }
+        let reuse = self
+            .last
+            .as_ref()
+            .filter(|last| last.crop == crop)
+            .and_then(|last| {
+                if late {
+                    return Some(Reuse::Late);
+                }
+                let light_change = average
+                    .as_ref()
+                    .map_or(f32::INFINITY, |a| a.distance(&last.average));
+                (self.skips.skip_static
+                    && mean_abs_diff(&image, &last.image) <= self.skips.static_threshold
+                    && light_change <= self.skips.static_light_threshold)
+                    .then_some(Reuse::Static)
+            });
+        if let Some(why) = reuse {
+            match why {
+                Reuse::Late => self.counts.reused_late += 1,
+                Reuse::Static => self.counts.reused_static += 1,
+            }
+            self.skip_frame(&source);
+            let last = self.last.as_ref().expect("reuse needs a relit frame");
+            return Ok(Outcome {
+                action: Action::Reused(why),
+                change: Some(&last.change),
+                predicted: last.predicted.clone(),
+                luma,
+                presence,
+            });
+        }
+        let out = self.relight(&image, source, want_prediction)?;
+        let Some(relit) = out.relit else {
+            return Ok(Outcome {
+                predicted: out.predicted,
+                ..passed(PassThrough::NonFinite, presence)
+            });
+        };
+        self.counts.relit += 1;
+        let change = LightingChange::new(&image, &relit, res, frame.format, frame.matrix);
+        let last = self.last.insert(Processed {
+            image,
+            average: average.unwrap_or(out.source),
+            change,
+            crop,
+            predicted: out.predicted.clone(),
+        });
+        Ok(Outcome {
+            action: Action::Relit,
+            change: Some(&last.change),
+            predicted: out.predicted,
+            luma,
+            presence,
+        })
+    }
+
+    /// Runs the network on one image (planar sRGB in [0, 1], 3 × R × R) with the
+    /// stream's temporal filters. The light decoder runs when the source is unknown
+    /// or `want_prediction`. A NaN or Inf anywhere resets the temporal state.
+    pub fn relight(
+        &mut self,
+        image: &[f32],
+        source: Source,
+        want_prediction: bool,
+    ) -> Result<FrameOutput, EngineError> {
+        let Some((_, target_code)) = &self.target else {
+            return Err(EngineError::Inference("no target light is set".into()));
+        };
+        let target_code = target_code.clone();
+        let encoded = self.relighter.encode(image)?;
+        let predicted = if want_prediction || source == Source::Unknown {
+            self.counts.predictions += 1;
+            Some(self.relighter.predict_light(&encoded)?)
+        } else {
+            None
+        };
+        let this_source = match source {
+            Source::Known(l) => l,
+            Source::Unknown => predicted.clone().expect("predicted above"),
+        };
+        if !this_source.is_finite() {
+            // A broken prediction must neither light this frame nor enter the average.
+            return Ok(self.non_finite(predicted, this_source));
+        }
+        self.last_source = Some(this_source.clone());
+        let averaged = timed(&mut self.counts.filter_seconds, || {
+            self.averager.push(this_source)
+        });
+        let source_code = self.relighter.encode_light(&averaged)?;
+        let (smoother, filter_seconds) = (&mut self.smoother, &mut self.counts.filter_seconds);
+        let relit = self
+            .relighter
+            .relight(&encoded, &source_code, &target_code, |features| {
+                timed(filter_seconds, || smoother.smooth(features))
+            })?;
+        match relit {
+            Relit::Image(relit) => Ok(FrameOutput {
+                relit: Some(relit),
+                predicted: predicted.filter(Light::is_finite),
+                source: averaged,
+            }),
+            Relit::NonFinite => Ok(self.non_finite(predicted, averaged)),
+        }
+    }
+
+    /// The output of a frame the model broke on: nothing relit, and the temporal
+    /// state starts afresh with the next frame.
+    fn non_finite(&mut self, predicted: Option<Light>, source: Light) -> FrameOutput {
+        self.counts.passed_non_finite += 1;
+        self.reset();
+        FrameOutput {
+            relit: None,
+            predicted: predicted.filter(Light::is_finite),
+            source,
+        }
+    }
+
+    /// The source light the frame would be de-lit with, if its own is `source`
+    /// (the last frame's own light when unknown), without changing any state.
+    fn peek_average(&self, source: &Source) -> Option<Light> {
+        let light = match source {
+            Source::Known(l) => l.clone(),
+            Source::Unknown => self.last_source.clone()?,
+        };
+        Some(self.averager.clone().push(light))
+    }
+
+    /// Accounts for a frame that did not run the network: its source light joins
+    /// the average, and the smoothed features advance as if the last frame's had
+    /// been seen again, which is what a static scene gives.
+    fn skip_frame(&mut self, source: &Source) {
+        let light = match source {
+            Source::Known(l) => Some(l.clone()),
+            Source::Unknown => self.last_source.clone(),
+        };
+        if let Some(l) = light {
+            self.averager.push(l);
+        }
+        self.smoother.repeat_last();
+    }
+}

@@ -1,0 +1,338 @@
+//! What the user set: the element's properties, their defaults, and their
+//! ParamSpecs (the blurbs `gst-inspect-1.0 lsydrelight` shows). Nothing here is
+//! derived from the stream; decoded targets and the like are state.
+
+use std::path::PathBuf;
+use std::sync::LazyLock;
+
+use gst::glib;
+use gst::prelude::*;
+
+use super::ExecutionProvider;
+use crate::engine::{Skips, Temporal};
+use crate::paths;
+
+pub const DEFAULT_THREADS: u32 = 2;
+const MAX_MONITOR_OFFSET: i64 = 10_000_000_000;
+const DEFAULT_MONITOR_TIMEOUT: gst::ClockTime = gst::ClockTime::from_seconds(1);
+const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
+const DEFAULT_CROP_CENTRE: f64 = 0.5;
+const DEFAULT_CROP_SIZE: f64 = 1.0;
+const DEFAULT_FEATHER: f64 = 0.06;
+const DEFAULT_QOS: bool = true;
+
+/// The square face region, as fractions of the frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CropRegion {
+    pub x: f64,
+    pub y: f64,
+    /// Side, as a fraction of the frame's shorter side.
+    pub size: f64,
+}
+
+#[derive(Debug, Clone)]
+pub struct Settings {
+    pub model_location: PathBuf,
+    pub ort_library: PathBuf,
+    pub provider: ExecutionProvider,
+    pub threads: u32,
+    pub target_location: PathBuf,
+    /// Nanoseconds by which the monitor content that lit a face frame precedes it.
+    pub monitor_offset: i64,
+    pub monitor_timeout: gst::ClockTime,
+    pub temporal: Temporal,
+    pub crop: CropRegion,
+    /// Fade width at the face region's inner edges, as a fraction of the region.
+    pub feather: f64,
+    pub reset_gap: gst::ClockTime,
+    pub skips: Skips,
+    pub qos: bool,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Settings {
+            model_location: paths::default_model(),
+            ort_library: paths::default_ort_library(),
+            provider: ExecutionProvider::Cpu,
+            threads: DEFAULT_THREADS,
+            target_location: paths::default_target(),
+            monitor_offset: 0,
+            monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
+            temporal: Temporal::default(),
+            crop: CropRegion {
+                x: DEFAULT_CROP_CENTRE,
+                y: DEFAULT_CROP_CENTRE,
+                size: DEFAULT_CROP_SIZE,
+            },
+            feather: DEFAULT_FEATHER,
+            reset_gap: DEFAULT_RESET_GAP,
+            skips: Skips::default(),
+            qos: DEFAULT_QOS,
+        }
+    }
+}
+
+fn path_value(p: &std::path::Path) -> glib::Value {
+    p.to_string_lossy().into_owned().to_value()
+}
+
+fn path_of(v: &glib::Value) -> PathBuf {
+    PathBuf::from(v.get::<Option<String>>().ok().flatten().unwrap_or_default())
+}
+
+impl Settings {
+    /// Sets a property by name; false for a name that is not a setting (the
+    /// element handles those: `stats`).
+    pub fn set(&mut self, name: &str, v: &glib::Value) -> bool {
+        let checked = "GObject checked the value's type";
+        match name {
+            "model-location" => self.model_location = path_of(v),
+            "ort-library" => self.ort_library = path_of(v),
+            "execution-provider" => self.provider = v.get().expect(checked),
+            "threads" => self.threads = v.get().expect(checked),
+            "target-location" => self.target_location = path_of(v),
+            "monitor-offset" => self.monitor_offset = v.get().expect(checked),
+            "monitor-timeout" => {
+                self.monitor_timeout = gst::ClockTime::from_nseconds(v.get().expect(checked))
+            }
+            "alpha" => self.temporal.alpha = v.get().expect(checked),
+            "beta" => self.temporal.beta = v.get().expect(checked),
+            "average-frames" => {
+                self.temporal.average_frames = v.get::<u32>().expect(checked) as usize
+            }
+            "crop-x" => self.crop.x = v.get().expect(checked),
+            "crop-y" => self.crop.y = v.get().expect(checked),
+            "crop-size" => self.crop.size = v.get().expect(checked),
+            "feather" => self.feather = v.get().expect(checked),
+            "reset-gap" => self.reset_gap = gst::ClockTime::from_nseconds(v.get().expect(checked)),
+            "skip-static" => self.skips.skip_static = v.get().expect(checked),
+            "static-threshold" => {
+                self.skips.static_threshold = v.get::<f64>().expect(checked) as f32
+            }
+            "static-light-threshold" => {
+                self.skips.static_light_threshold = v.get::<f64>().expect(checked) as f32
+            }
+            "skip-same-light" => self.skips.skip_same_light = v.get().expect(checked),
+            "same-light-tolerance" => {
+                self.skips.same_light_tolerance = v.get::<f64>().expect(checked) as f32
+            }
+            "skip-absent" => self.skips.skip_absent = v.get().expect(checked),
+            "presence-threshold" => {
+                self.skips.presence_threshold = v.get::<f64>().expect(checked) as f32
+            }
+            "qos" => self.qos = v.get().expect(checked),
+            _ => return false,
+        }
+        true
+    }
+
+    /// A property by name; None for a name that is not a setting.
+    pub fn get(&self, name: &str) -> Option<glib::Value> {
+        Some(match name {
+            "model-location" => path_value(&self.model_location),
+            "ort-library" => path_value(&self.ort_library),
+            "execution-provider" => self.provider.to_value(),
+            "threads" => self.threads.to_value(),
+            "target-location" => path_value(&self.target_location),
+            "monitor-offset" => self.monitor_offset.to_value(),
+            "monitor-timeout" => self.monitor_timeout.nseconds().to_value(),
+            "alpha" => self.temporal.alpha.to_value(),
+            "beta" => self.temporal.beta.to_value(),
+            "average-frames" => (self.temporal.average_frames as u32).to_value(),
+            "crop-x" => self.crop.x.to_value(),
+            "crop-y" => self.crop.y.to_value(),
+            "crop-size" => self.crop.size.to_value(),
+            "feather" => self.feather.to_value(),
+            "reset-gap" => self.reset_gap.nseconds().to_value(),
+            "skip-static" => self.skips.skip_static.to_value(),
+            "static-threshold" => (self.skips.static_threshold as f64).to_value(),
+            "static-light-threshold" => (self.skips.static_light_threshold as f64).to_value(),
+            "skip-same-light" => self.skips.skip_same_light.to_value(),
+            "same-light-tolerance" => (self.skips.same_light_tolerance as f64).to_value(),
+            "skip-absent" => self.skips.skip_absent.to_value(),
+            "presence-threshold" => (self.skips.presence_threshold as f64).to_value(),
+            "qos" => self.qos.to_value(),
+            _ => return None,
+        })
+    }
+}
+
+/// The element's properties.
+pub fn properties() -> &'static [glib::ParamSpec] {
+    static PROPERTIES: LazyLock<Vec<glib::ParamSpec>> = LazyLock::new(|| {
+        let d = Settings::default();
+        let path = |p: &PathBuf| p.to_str().unwrap_or("").to_owned();
+        vec![
+            glib::ParamSpecString::builder("model-location")
+                .nick("Model")
+                .blurb("Folder of the personalised model (model.json and its ONNX stages); the shipped default is models/default")
+                .default_value(Some(path(&d.model_location).as_str()))
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecString::builder("ort-library")
+                .nick("ONNX Runtime library")
+                .blurb("Path of libonnxruntime.so (1.31, from the onnxruntime Python wheel); LSYDRELIGHT_ORT_LIBRARY sets the default. One library per process")
+                .default_value(Some(path(&d.ort_library).as_str()))
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecEnum::builder_with_default("execution-provider", d.provider)
+                .nick("Execution provider")
+                .blurb("Where the network runs; a provider that cannot start is an error, never a silent fall back to the CPU")
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecUInt::builder("threads")
+                .nick("Threads")
+                .blurb("CPU threads of each network stage (the small presence check always runs on one CPU thread)")
+                .minimum(1)
+                .maximum(64)
+                .default_value(DEFAULT_THREADS)
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecString::builder("target-location")
+                .nick("Target light")
+                .blurb("PNG image of the monitor content to relight to (as a screen capture would show it); can change while playing")
+                .default_value(Some(path(&d.target_location).as_str()))
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecInt64::builder("monitor-offset")
+                .nick("Monitor offset")
+                .blurb("Nanoseconds by which the monitor content that lit a face frame precedes it (display and camera latency); a negative offset, for a screen capture that lags, adds as much latency")
+                .minimum(-MAX_MONITOR_OFFSET)
+                .maximum(MAX_MONITOR_OFFSET)
+                .default_value(0)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecUInt64::builder("monitor-timeout")
+                .nick("Monitor timeout")
+                .blurb("Nanoseconds a monitor frame stays on screen without a newer one (or its duration, if longer); after that the monitor stream counts as stalled and the predicted light is used. In a non-live pipeline, also how long face frames wait for a monitor stream that sends nothing before a warning says so")
+                .default_value(DEFAULT_MONITOR_TIMEOUT.nseconds())
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecFloat::builder("alpha")
+                .nick("Feature smoothing")
+                .blurb("Weight of the current frame's de-lit features, f = alpha*f_t + (1-alpha)*f_(t-1); 1 turns smoothing off (paper: 0.7)")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.temporal.alpha)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecFloat::builder("beta")
+                .nick("Source-light averaging decay")
+                .blurb("Weight beta^i of the source light i frames ago in the average (paper: 0.6)")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.temporal.beta)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecUInt::builder("average-frames")
+                .nick("Source-light averaging frames")
+                .blurb("Number N of frames whose source lights are averaged; 1 turns averaging off (paper: 3)")
+                .minimum(1)
+                .maximum(16)
+                .default_value(d.temporal.average_frames as u32)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("crop-x")
+                .nick("Face region centre x")
+                .blurb("Horizontal centre of the square face region, as a fraction of the frame width")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(DEFAULT_CROP_CENTRE)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("crop-y")
+                .nick("Face region centre y")
+                .blurb("Vertical centre of the square face region, as a fraction of the frame height")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(DEFAULT_CROP_CENTRE)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("crop-size")
+                .nick("Face region size")
+                .blurb("Side of the square face region as a fraction of the frame's shorter side (1: a head-and-shoulders square of full height)")
+                .minimum(0.05)
+                .maximum(1.0)
+                .default_value(DEFAULT_CROP_SIZE)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("feather")
+                .nick("Feather")
+                .blurb("Width, as a fraction of the face region, over which the relighting fades out towards region edges inside the frame")
+                .minimum(0.0)
+                .maximum(0.5)
+                .default_value(DEFAULT_FEATHER)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecUInt64::builder("reset-gap")
+                .nick("Reset gap")
+                .blurb("Nanoseconds between face frames beyond which the temporal state starts afresh")
+                .default_value(DEFAULT_RESET_GAP.nseconds())
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("skip-static")
+                .nick("Skip static scenes")
+                .blurb("Reuse the last relighting while the face region and the source light barely change (thresholds below); for clean, still sources such as screen recordings, off by default because webcam noise never passes the thresholds")
+                .default_value(d.skips.skip_static)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("static-threshold")
+                .nick("Static image threshold")
+                .blurb("Mean absolute change of the network's input (sRGB in [0, 1]) since the last relit frame below which the scene counts as static")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.skips.static_threshold as f64)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("static-light-threshold")
+                .nick("Static light threshold")
+                .blurb("Mean absolute change of the averaged source light (linear) below which the light counts as unchanged")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.skips.static_light_threshold as f64)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("skip-same-light")
+                .nick("Skip when source is target")
+                .blurb("Pass frames through when the source light equals the target light within same-light-tolerance")
+                .default_value(d.skips.skip_same_light)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("same-light-tolerance")
+                .nick("Same light tolerance")
+                .blurb("Mean absolute difference of source and target light (linear) under which they count as the same")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.skips.same_light_tolerance as f64)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("skip-absent")
+                .nick("Skip when nobody is there")
+                .blurb("Pass frames through untouched while the model's presence stage sees nobody in the face region (the user walked away)")
+                .default_value(d.skips.skip_absent)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("presence-threshold")
+                .nick("Presence threshold")
+                .blurb("Probability of someone being in the face region below which nobody counts as there")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.skips.presence_threshold as f64)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("qos")
+                .nick("QoS")
+                .blurb("In live pipelines, reuse the last relighting for frames that are already late instead of falling further behind, and post QoS messages")
+                .default_value(DEFAULT_QOS)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoxed::builder::<gst::Structure>("stats")
+                .nick("Statistics")
+                .blurb("Frames processed, relit, passed through and skipped (and why), source lights used, monitor fallbacks, resets, work done, and seconds spent: in all, in the network, cropping, pasting, smoothing and reading monitor frames")
+                .read_only()
+                .build(),
+        ]
+    });
+    PROPERTIES.as_ref()
+}

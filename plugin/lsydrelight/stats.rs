@@ -1,0 +1,60 @@
+//! The `stats` property: what the element did and where its time went. The
+//! element counts what happens around the policy (frames, monitor stream, side
+//! stream, pasting); the policy counts its own decisions and the network's time.
+
+use crate::engine::PolicyCounts;
+
+#[derive(Debug, Default, Clone, Copy)]
+pub struct Stats {
+    pub frames: u64,
+    /// Seconds spent on face frames in all, and pasting the lighting change back.
+    pub processing_seconds: f64,
+    pub paste_seconds: f64,
+    /// Seconds spent turning monitor frames into lights.
+    pub monitor_light_seconds: f64,
+    pub known_source: u64,
+    pub predicted_source: u64,
+    pub fallbacks: u64,
+    /// Monitor frames that arrived.
+    pub monitor_frames: u64,
+    /// Monitor frames whose light was computed: the ones face frames used.
+    pub monitor_decoded: u64,
+    pub monitor_out: u64,
+    pub monitor_dropped: u64,
+    /// The policy's counts as of the last frame; kept after stop, so the last
+    /// run's figures stay readable.
+    pub policy: PolicyCounts,
+}
+
+impl Stats {
+    pub fn to_structure(self) -> gst::Structure {
+        let p = &self.policy;
+        gst::Structure::builder("lsydrelight-stats")
+            .field("frames", self.frames)
+            .field("relit", p.relit)
+            .field("passed-through", p.passed_non_finite)
+            .field("skipped-dark", p.passed_dark)
+            .field("skipped-absent", p.passed_absent)
+            .field("skipped-same-light", p.passed_same_light)
+            .field("skipped-static", p.reused_static)
+            .field("qos-reused", p.reused_late)
+            .field("processing-seconds", self.processing_seconds)
+            .field("network-seconds", p.network_seconds)
+            .field("crop-seconds", p.crop_seconds)
+            .field("paste-seconds", self.paste_seconds)
+            .field("smoothing-seconds", p.filter_seconds)
+            .field("monitor-light-seconds", self.monitor_light_seconds)
+            .field("known-source", self.known_source)
+            .field("predicted-source", self.predicted_source)
+            .field("fallbacks", self.fallbacks)
+            .field("resets", p.resets)
+            .field("monitor-frames", self.monitor_frames)
+            .field("monitor-decoded", self.monitor_decoded)
+            .field("monitor-out", self.monitor_out)
+            .field("monitor-dropped", self.monitor_dropped)
+            .field("target-encodes", p.target_encodes)
+            .field("light-predictions", p.predictions)
+            .field("non-finite", p.passed_non_finite)
+            .build()
+    }
+}
