@@ -29,8 +29,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def heldout(folder: Path, held: data.Heldout) -> dict:
     """Accuracy with the source light known and predicted, and the prediction's error."""
-    net = benchmark.OrtModel(folder, 2)
-    codes = [net.code(held.lights[j][None]) for j in range(held.lights.shape[0])]
+    chain = contract.StageChain(folder, 2)
+    codes = [chain.light_code(held.lights[j][None]) for j in range(held.lights.shape[0])]
     out = {}
     for mode in ("known", "predicted"):
         monitor_mae: list[float] = []
@@ -45,14 +45,13 @@ def heldout(folder: Path, held: data.Heldout) -> dict:
             mae: list = monitor_mae,
             colours: list = colours,
         ) -> np.ndarray:
-            enc = dict(zip(net.enc_names, net.s["encoder"].run(None, {"image": x[None]})))
-            (pred,) = net.s["light_decoder"].run(None, {k: enc[k] for k in ("e2", "e4", "e6")})
+            pred = chain.predict_light(x[None])
             mae.append(float(np.abs(pred[0] - held.lights[i]).mean()))
             colours.append((pred[0].mean(axis=(1, 2)), held.lights[i].mean(axis=(1, 2))))
             source = held.lights[i][None] if mode == "known" else pred
-            return np.concatenate([net.relight(x[None], source, codes[j]) for j in targets])
+            return np.concatenate([chain.relight(x[None], source, codes[j]) for j in targets])
 
-        out[mode] = metrics.score_test_set(held, net.m["resolution"], relight)
+        out[mode] = metrics.score_test_set(held, chain.resolution, relight)
         if mode == "known":
             out[mode]["monitor_mae"] = float(np.mean(monitor_mae))
             pred, true = (np.array(c) for c in zip(*colours))
