@@ -27,7 +27,7 @@ import torch
 from onnx import TensorProto, helper
 
 from . import contract, data, export, metrics, model, variants
-from .train import load_network
+from .runs import load_network
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "target" / "bench-models"

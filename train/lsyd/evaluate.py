@@ -30,7 +30,7 @@ import numpy as np
 import torch
 
 from . import data, metrics
-from .train import load_network
+from .runs import load_network
 
 TABLE2_RECORDINGS = ("steady", "slow", "cuts")
 

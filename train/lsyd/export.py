@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from . import contract, data, model
-from .train import load_network
+from .runs import load_network
 
 PARITY_TOLERANCE = 1e-4
 OPSET = 17

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from . import benchmark, contract, data, metrics
-from .train import TrainConfig, hardware
+from .runs import hardware, read_config
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -138,11 +138,7 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
     h = m["metrics"].get("heldout", {})
     e = m["metrics"].get("element", {})
     p = m["metrics"].get("presence", {})
-    cfg = (
-        TrainConfig.from_json(json.loads((run / "config.json").read_text()))
-        if run and (run / "config.json").exists()
-        else None
-    )
+    cfg = read_config(run) if run and (run / "config.json").exists() else None
     lines = [
         f"# Model card: `{model.name}`",
         "",
