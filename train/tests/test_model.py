@@ -4,7 +4,8 @@ and resumable; export matches PyTorch and loads in ONNX Runtime."""
 import numpy as np
 import torch
 
-from lsyd import compare, contract, data, export, runs, train
+from lsyd import contract, data, export, runs, train
+from lsyd.evaluation import compare
 
 
 def test_delighting_removes_the_source_light(sim_data, shipped_model):

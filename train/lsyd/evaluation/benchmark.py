@@ -1,7 +1,7 @@
 """The model side of the run-time against error benchmark, and its report.
 
-    python -m lsyd.benchmark export --data data --runs runs      # variants into target/bench-models
-    python -m lsyd.benchmark report --data data --out results/benchmark
+    python -m lsyd.evaluation.benchmark export --data data --runs runs      # variants into target/bench-models
+    python -m lsyd.evaluation.benchmark report --data data --out results/benchmark
 
 ``export`` exports every trained variant (width, resolution) and makes fp16 and
 int8 versions of the default model. ``report`` (after the element's side,
@@ -26,10 +26,10 @@ import onnxruntime as ort
 import torch
 from onnx import TensorProto, helper
 
-from . import contract, data, export, metrics, model, variants
-from .runs import load_network
+from .. import contract, data, export, model, variants
+from ..runs import load_network
+from . import ROOT, metrics
 
-ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "target" / "bench-models"
 VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96")
 

@@ -1,6 +1,6 @@
 """Measures a model for its card and writes the card.
 
-    python -m lsyd.modelcard --model models/default --run runs/default --data data
+    python -m lsyd.evaluation.modelcard --model models/default --run runs/default --data data
 
 Measures on the held-out set (9 poses x 9 lights, every ordered pair: 648
 relightings of the paper's 324 pairs) with ONNX Runtime, as the element runs
@@ -21,10 +21,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import benchmark, contract, data, metrics
-from .runs import hardware, read_config
-
-ROOT = Path(__file__).resolve().parents[2]
+from .. import contract, data
+from ..runs import hardware, read_config
+from . import ROOT, benchmark, metrics
 
 
 def heldout(folder: Path, held: data.Heldout) -> dict:
@@ -77,7 +76,7 @@ def measure(model: Path, held: data.Heldout, data_root: Path) -> dict:
     m = contract.read(model / "model.json")
     n_pose, n_light = held.images.shape[:2]
     return {
-        "command": f"python -m lsyd.modelcard --model {model.relative_to(ROOT)} --data {data_root.name}",
+        "command": f"python -m lsyd.evaluation.modelcard --model {model.relative_to(ROOT)} --data {data_root.name}",
         "pairs": n_pose * n_light * (n_light - 1) // 2,
         "relightings": n_pose * n_light * (n_light - 1),
         **heldout(model, held),

@@ -1,6 +1,6 @@
 """Compare trained runs on the validation set: what the additions beyond the paper change.
 
-    python -m lsyd.compare --data data --runs runs p-r96 e-r96
+    python -m lsyd.evaluation.compare --data data --runs runs p-r96 e-r96
 
 Each run is exported to ``target/compare/<run>`` and scored with ONNX Runtime on the
 validation set (9 poses x 9 lights, exact ground truth): relighting RMSE with the
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import contract, data, export, losses, modelcard
+from .. import contract, data, export, losses
+from . import ROOT, modelcard
 
-ROOT = Path(__file__).resolve().parents[2]
 # The light pairs of a 9-light set (held-out or validation) that the de-lighting ratio compares.
 DELIGHT_PAIRS = ((0, 5), (2, 3), (0, 8), (4, 6))
 
