@@ -10,7 +10,7 @@
 //! (frame-to-frame change against the ground truth's change), throughput, CPU
 //! seconds per frame and peak memory. Selected variants are also timed frame by
 //! frame at 720p and 1080p for p50/p99 latency. Results go to
-//! `<out>/element.json`; `python -m lsyd.benchmark` adds the held-out accuracy,
+//! `<out>/element.json`; `python -m lsyd.evaluation.benchmark` adds the held-out accuracy,
 //! the PyTorch peer and the hardware limit, and writes the tables and plot.
 
 #[path = "common/mod.rs"]

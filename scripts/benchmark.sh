@@ -10,6 +10,6 @@ cd "$(dirname "$0")/.."
 scripts/setup.sh full
 cargo build --release -p deskstage
 [ -f data/validation/clean.npy ] || target/release/deskstage validation --out data/validation
-(cd train && ../.venv/bin/python -m lsyd.benchmark export)
+(cd train && ../.venv/bin/python -m lsyd.evaluation.benchmark export)
 cargo run --release --example benchmark -- "$@"
-(cd train && ../.venv/bin/python -m lsyd.benchmark report)
+(cd train && ../.venv/bin/python -m lsyd.evaluation.benchmark report)

@@ -62,7 +62,7 @@ pub struct Score {
 }
 
 /// Thresholds of the adjacent-frame error rates, RMSE on 0-255: the same as
-/// `train/lsyd/metrics.py`'s `TEMPORAL_THRESHOLDS`.
+/// `train/lsyd/evaluation/metrics.py`'s `TEMPORAL_THRESHOLDS`.
 pub const ADJACENT_THRESHOLDS: [f64; 3] = [2.0, 4.0, 8.0];
 
 /// A structure of numbers as JSON.

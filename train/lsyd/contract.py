@@ -14,7 +14,9 @@ Stages (names, inputs -> outputs; N = 1, R = resolution, c* = widths):
 - ``delight``: ``e1`` .. ``e7``, ``source_code`` [N,256] -> ``f1`` .. ``f7``
 - ``decoder``: ``f1`` .. ``f7``, ``stem``, ``target_code`` [N,256] -> ``relit`` [N,3,R,R]
 
-Smoothing applies to the de-lit features ``f1`` .. ``f7``.
+Smoothing applies to the de-lit features ``f1`` .. ``f7``. ``StageChain`` runs a
+model folder's stages in that order in ONNX Runtime; every Python user of an exported
+model relights through it.
 """
 
 from __future__ import annotations
@@ -32,6 +34,9 @@ LIGHT_ROWS = 16
 LIGHT_COLS = 32
 SMOOTHED = [f"f{i}" for i in range(1, 8)]
 RAW = [f"e{i}" for i in range(1, 8)]
+STAGES = ("light_encoder", "encoder", "light_decoder", "delight", "decoder")
+# The encoder features the light decoder predicts the source light from.
+LIGHT_DECODER_INPUTS = ("e2", "e4", "e6")
 
 IMAGE = {
     "layout": "NCHW",
@@ -53,6 +58,11 @@ LIGHT = {
         "column 0 its left edge as the user sees it"
     ),
 }
+
+
+def stage_file(stage: str) -> str:
+    """The file of a stage in a model folder, as the manifest records it."""
+    return f"{stage}.onnx"
 
 
 def stage_specs(resolution: int, widths: tuple[int, ...]) -> dict:
@@ -77,24 +87,28 @@ def stage_specs(resolution: int, widths: tuple[int, ...]) -> dict:
         return [{"name": n, "shape": s, "dtype": "float32"} for n, s in names_shapes.items()]
 
     return {
-        "light_encoder": {"file": "light_encoder.onnx", "inputs": t({"light": light}), "outputs": t({"code": code})},
+        "light_encoder": {
+            "file": stage_file("light_encoder"),
+            "inputs": t({"light": light}),
+            "outputs": t({"code": code}),
+        },
         "encoder": {
-            "file": "encoder.onnx",
+            "file": stage_file("encoder"),
             "inputs": t({"image": [1, 3, r, r]}),
             "outputs": t({"stem": stem, **raw_shapes}),
         },
         "light_decoder": {
-            "file": "light_decoder.onnx",
-            "inputs": t({k: raw_shapes[k] for k in ("e2", "e4", "e6")}),
+            "file": stage_file("light_decoder"),
+            "inputs": t({k: raw_shapes[k] for k in LIGHT_DECODER_INPUTS}),
             "outputs": t({"predicted_light": light}),
         },
         "delight": {
-            "file": "delight.onnx",
+            "file": stage_file("delight"),
             "inputs": t({**raw_shapes, "source_code": code}),
             "outputs": t(delit_shapes),
         },
         "decoder": {
-            "file": "decoder.onnx",
+            "file": stage_file("decoder"),
             "inputs": t({**delit_shapes, "stem": stem, "target_code": code}),
             "outputs": t({"relit": [1, 3, r, r]}),
         },
@@ -165,7 +179,84 @@ def _area_matrix(n_in: int, n_out: int) -> np.ndarray:
 
 
 def open_session(path: Path, threads: int = 1) -> ort.InferenceSession:
-    """An ONNX Runtime CPU session of one stage file, for checks and measurements."""
+    """An ONNX Runtime CPU session of one stage file with the element's settings
+    (``plugin/engine/runtime.rs``): ``threads`` threads within an operator, none across
+    operators, and no spinning, since stages run one after another and a spinning stage
+    would starve the next."""
     opts = ort.SessionOptions()
     opts.intra_op_num_threads = threads
+    opts.inter_op_num_threads = 1
+    opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
     return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+
+
+class StageChain:
+    """A model folder's five stages in ONNX Runtime, run in the contract's order as the element
+    runs them. The export's parity check, the variants' calibration, the benchmark and the
+    evaluation all relight through it.
+
+    Tensors are the contract's, batch 1: images [1,3,R,R] sRGB in [0, 1], lights [1,3,16,32]
+    linear, codes [1,256]. ``encoded`` is the encoder's outputs by name (``stem``, ``e1`` ..
+    ``e7``); ``delit`` the de-lit features ``f1`` .. ``f7`` in order.
+    """
+
+    def __init__(self, folder: Path, threads: int = 1):
+        self.sessions = {stage: open_session(folder / stage_file(stage), threads) for stage in STAGES}
+        self._encoder_outputs = [o.name for o in self.sessions["encoder"].get_outputs()]
+        # From the graph, not the manifest: the export checks its stages before it writes one.
+        self.resolution: int = self.sessions["encoder"].get_inputs()[0].shape[-1]
+
+    def light_code(self, light: np.ndarray) -> np.ndarray:
+        """``light_encoder``: a light's code, for the source or the target."""
+        return self.sessions["light_encoder"].run(None, {"light": light})[0]
+
+    def encode(self, image: np.ndarray) -> dict[str, np.ndarray]:
+        """``encoder``: the image's stem and raw features by name."""
+        return dict(zip(self._encoder_outputs, self.sessions["encoder"].run(None, {"image": image})))
+
+    def predict_light(self, image: np.ndarray) -> np.ndarray:
+        """``encoder`` then ``light_decoder``: the source light predicted from the image alone."""
+        return self.sessions["light_decoder"].run(None, _light_decoder_feed(self.encode(image)))[0]
+
+    def delight(self, encoded: dict[str, np.ndarray], source_code: np.ndarray) -> list[np.ndarray]:
+        """``delight``: the raw features with the source light's code removed."""
+        return self.sessions["delight"].run(None, _delight_feed(encoded, source_code))
+
+    def relight(self, image: np.ndarray, source_light: np.ndarray, target_code: np.ndarray) -> np.ndarray:
+        """One frame relit from its source light (known, or from ``predict_light``) to the light
+        whose code is ``target_code``: ``encoder``, ``light_encoder`` on the source, ``delight``,
+        ``decoder``. Returns ``relit`` [1,3,R,R] in [0, 1]."""
+        encoded = self.encode(image)
+        delit = self.delight(encoded, self.light_code(source_light))
+        return self.sessions["decoder"].run(None, _decoder_feed(encoded, delit, target_code))[0]
+
+    def stage_inputs(
+        self, image: np.ndarray, source_light: np.ndarray, target_light: np.ndarray
+    ) -> dict[str, dict[str, np.ndarray]]:
+        """Every stage's inputs by name, as ``relight`` and ``predict_light`` feed them for one
+        frame relit from ``source_light`` to ``target_light`` (``light_encoder``'s are the source
+        light's): the data the int8 variant is calibrated on."""
+        encoded = self.encode(image)
+        delight = _delight_feed(encoded, self.light_code(source_light))
+        delit = self.sessions["delight"].run(None, delight)
+        return {
+            "light_encoder": {"light": source_light},
+            "encoder": {"image": image},
+            "light_decoder": _light_decoder_feed(encoded),
+            "delight": delight,
+            "decoder": _decoder_feed(encoded, delit, self.light_code(target_light)),
+        }
+
+
+def _light_decoder_feed(encoded: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    return {k: encoded[k] for k in LIGHT_DECODER_INPUTS}
+
+
+def _delight_feed(encoded: dict[str, np.ndarray], source_code: np.ndarray) -> dict[str, np.ndarray]:
+    return {**{e: encoded[e] for e in RAW}, "source_code": source_code}
+
+
+def _decoder_feed(
+    encoded: dict[str, np.ndarray], delit: list[np.ndarray], target_code: np.ndarray
+) -> dict[str, np.ndarray]:
+    return {**dict(zip(SMOOTHED, delit)), "stem": encoded["stem"], "target_code": target_code}

@@ -21,7 +21,7 @@ import torch
 from torch import nn
 
 from . import contract, data, model
-from .train import load_network
+from .runs import load_network
 
 PARITY_TOLERANCE = 1e-4
 OPSET = 17
@@ -149,20 +149,14 @@ def export(run: Path, data_root: Path, out: Path) -> dict:
 def parity(folder: Path, specs: dict, ref: dict[str, np.ndarray]) -> dict[str, float]:
     """Max abs difference of each stage's outputs (given PyTorch's inputs) and of the
     whole chain run in ONNX Runtime alone; raises when over the tolerance."""
+    chain = contract.StageChain(folder)
     diffs = {}
     for name, spec in specs.items():
-        sess = contract.open_session(folder / spec["file"])
         feed = {t["name"]: ref[t["name"]] for t in spec["inputs"]}
-        outs = sess.run([t["name"] for t in spec["outputs"]], feed)
+        outs = chain.sessions[name].run([t["name"] for t in spec["outputs"]], feed)
         diffs[name] = max(float(np.abs(o - ref[t["name"]]).max()) for o, t in zip(outs, spec["outputs"]))
     # The chain: ONNX Runtime's own intermediate tensors feed the next stage.
-    s = {n: contract.open_session(folder / sp["file"]) for n, sp in specs.items()}
-    enc = dict(zip([t["name"] for t in specs["encoder"]["outputs"]], s["encoder"].run(None, {"image": ref["image"]})))
-    (src_code,) = s["light_encoder"].run(None, {"light": ref["light"]})
-    (tgt_code,) = s["light_encoder"].run(None, {"light": ref["target_light"]})
-    delit = s["delight"].run(None, {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": src_code})
-    feed = {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": tgt_code}
-    (relit,) = s["decoder"].run(None, feed)
+    relit = chain.relight(ref["image"], ref["light"], chain.light_code(ref["target_light"]))
     diffs["chain"] = float(np.abs(relit - ref["relit"]).max())
     worst = max(diffs.values())
     if worst > PARITY_TOLERANCE:

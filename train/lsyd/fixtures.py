@@ -17,7 +17,6 @@ from pathlib import Path
 
 import numpy as np
 import onnx
-import onnxruntime as ort
 from onnx import TensorProto, helper
 from PIL import Image
 
@@ -26,8 +25,7 @@ from . import contract
 
 def _code(model: Path, image: Path) -> np.ndarray:
     light = contract.light_from_frames(np.asarray(Image.open(image).convert("RGB")))[None]
-    s = ort.InferenceSession(str(model / "light_encoder.onnx"), providers=["CPUExecutionProvider"])
-    return s.run(None, {"light": light})[0]
+    return contract.open_session(model / contract.stage_file("light_encoder")).run(None, {"light": light})[0]
 
 
 def nan_model(model: Path, out: Path, trigger: Path, normal: Path) -> float:

@@ -22,7 +22,6 @@ from onnxruntime.transformers.float16 import convert_float_to_float16
 
 from . import contract, data
 
-STAGES = ("light_encoder", "encoder", "light_decoder", "delight", "decoder")
 # Bounds on the relit image's difference from fp32 (sRGB in [0, 1]): mean and max
 # absolute difference over held-out relightings. ``tests/test_variants.py`` holds
 # every variant to them. The shipped model measures fp16 7.5e-5 mean, 6.1e-4 max, and int8
@@ -32,24 +31,11 @@ ERROR_BOUNDS = {"fp16": (0.0005, 0.005), "int8": (0.01, 0.1)}
 
 def chain_inputs(model: Path, images: np.ndarray, lights: np.ndarray) -> dict[str, list[dict]]:
     """Every stage's inputs for each (image, light) pair, from the fp32 model: calibration data."""
-    m = contract.read(model / "model.json")
-    s = {k: contract.open_session(model / m["stages"][k]["file"]) for k in STAGES}
-    enc_names = [o.name for o in s["encoder"].get_outputs()]
-    feeds: dict[str, list[dict]] = {k: [] for k in STAGES}
-    target = lights[::-1]
-    for img, light, tgt in zip(images, lights, target):
-        enc = dict(zip(enc_names, s["encoder"].run(None, {"image": img[None]})))
-        feeds["encoder"].append({"image": img[None]})
-        feeds["light_encoder"].append({"light": light[None]})
-        feeds["light_decoder"].append({k: enc[k] for k in ("e2", "e4", "e6")})
-        (code,) = s["light_encoder"].run(None, {"light": light[None]})
-        (tcode,) = s["light_encoder"].run(None, {"light": tgt[None]})
-        din = {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": code}
-        feeds["delight"].append(din)
-        delit = s["delight"].run(None, din)
-        feeds["decoder"].append(
-            {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": tcode}
-        )
+    chain = contract.StageChain(model)
+    feeds: dict[str, list[dict]] = {k: [] for k in contract.STAGES}
+    for img, light, tgt in zip(images, lights, lights[::-1]):
+        for stage, feed in chain.stage_inputs(img[None], light[None], tgt[None]).items():
+            feeds[stage].append(feed)
     return feeds
 
 
@@ -75,17 +61,17 @@ def _copy_manifest(model: Path, out: Path, precision: str) -> None:
 
 def to_fp16(model: Path, out: Path) -> None:
     _copy_manifest(model, out, "fp16")
-    for stage in STAGES:
-        m = onnx.load(str(model / f"{stage}.onnx"))
-        onnx.save(convert_float_to_float16(m, keep_io_types=True), str(out / f"{stage}.onnx"))
+    for stage in contract.STAGES:
+        m = onnx.load(str(model / contract.stage_file(stage)))
+        onnx.save(convert_float_to_float16(m, keep_io_types=True), str(out / contract.stage_file(stage)))
 
 
 def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]]) -> None:
     _copy_manifest(model, out, "int8")
-    for stage in STAGES:
+    for stage in contract.STAGES:
         quantize_static(
-            str(model / f"{stage}.onnx"),
-            str(out / f"{stage}.onnx"),
+            str(model / contract.stage_file(stage)),
+            str(out / contract.stage_file(stage)),
             _Reader(calibration[stage]),
             quant_format=QuantFormat.QDQ,
             per_channel=True,

@@ -1,4 +1,5 @@
-"""The model contract: stage shapes agree with the network, and lights are computed as defined."""
+"""The model contract: stage shapes agree with the network, lights are computed as defined,
+and the stage chain feeds every stage what it takes."""
 
 import numpy as np
 import pytest
@@ -63,3 +64,16 @@ def test_manifest_round_trip_and_refusal(tmp_path):
     contract.write(tmp_path / "model.json", m)
     with pytest.raises(ValueError, match="version"):
         contract.read(tmp_path / "model.json")
+
+
+def test_stage_chain_feeds_every_stage_its_inputs(shipped_model):
+    chain = contract.StageChain(shipped_model)
+    r = chain.resolution
+    rng = np.random.default_rng(0)
+    image = rng.random((1, 3, r, r), dtype=np.float32)
+    source, target = rng.random((2, 1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS), dtype=np.float32)
+    feeds = chain.stage_inputs(image, source, target)
+    for stage in contract.STAGES:
+        assert list(feeds[stage]) == [i.name for i in chain.sessions[stage].get_inputs()], stage
+    (relit,) = chain.sessions["decoder"].run(None, feeds["decoder"])
+    np.testing.assert_array_equal(relit, chain.relight(image, source, chain.light_code(target)))

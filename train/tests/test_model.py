@@ -4,7 +4,8 @@ and resumable; export matches PyTorch and loads in ONNX Runtime."""
 import numpy as np
 import torch
 
-from lsyd import compare, contract, data, export, train
+from lsyd import contract, data, export, runs, train
+from lsyd.evaluation import compare
 
 
 def test_delighting_removes_the_source_light(sim_data, shipped_model):
@@ -17,16 +18,16 @@ def test_delighting_removes_the_source_light(sim_data, shipped_model):
     assert np.median(ratios) < 0.5, np.round(ratios, 3)
 
 
-def tiny_config(steps: int) -> train.TrainConfig:
+def tiny_config(steps: int) -> runs.TrainConfig:
     from lsyd import model
 
     # With the shipped default's losses beyond the paper, so that their terms are trained and resumed too.
-    return train.TrainConfig(
+    return runs.TrainConfig(
         net=model.NetConfig(resolution=64, width=0.125),
         steps=steps,
         batch=4,
         pairs="both",
-        weights=train.LossWeights(delit_consistency=0.1, monitor_colour=1.0),
+        weights=runs.LossWeights(delit_consistency=0.1, monitor_colour=1.0),
     )
 
 

@@ -3,14 +3,14 @@ error bounds ``variants.ERROR_BOUNDS`` states against fp32."""
 
 import numpy as np
 
-from lsyd import benchmark, contract, data, variants
+from lsyd import contract, data, variants
 
 
 def relight_all(folder, images: np.ndarray, lights: np.ndarray) -> np.ndarray:
     """Each image relit from its light to the next image's light."""
-    net = benchmark.OrtModel(folder, 1)
+    chain = contract.StageChain(folder)
     outs = [
-        net.relight(img[None], src[None], net.code(tgt[None]))[0]
+        chain.relight(img[None], src[None], chain.light_code(tgt[None]))[0]
         for img, src, tgt in zip(images, lights, np.roll(lights, 1, axis=0))
     ]
     return np.stack(outs)

@@ -1,7 +1,7 @@
 """The model side of the run-time against error benchmark, and its report.
 
-    python -m lsyd.benchmark export --data data --runs runs      # variants into target/bench-models
-    python -m lsyd.benchmark report --data data --out results/benchmark
+    python -m lsyd.evaluation.benchmark export --data data --runs runs      # variants into target/bench-models
+    python -m lsyd.evaluation.benchmark report --data data --out results/benchmark
 
 ``export`` exports every trained variant (width, resolution) and makes fp16 and
 int8 versions of the default model. ``report`` (after the element's side,
@@ -26,10 +26,10 @@ import onnxruntime as ort
 import torch
 from onnx import TensorProto, helper
 
-from . import contract, data, export, metrics, model, variants
-from .train import load_network
+from .. import contract, data, export, model, variants
+from ..runs import load_network
+from . import ROOT, metrics
 
-ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "target" / "bench-models"
 VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96")
 
@@ -56,55 +56,29 @@ def export_all(data_root: Path, runs: Path) -> None:
     variants.to_int8(default, BENCH / "default-int8", variants.chain_inputs(default, images, lights))
 
 
-class OrtModel:
-    """A contract model run stage by stage in ONNX Runtime, as the engine does."""
-
-    def __init__(self, folder: Path, threads: int):
-        self.m = contract.read(folder / "model.json")
-        opts = ort.SessionOptions()
-        opts.intra_op_num_threads = threads
-        opts.inter_op_num_threads = 1
-        opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-        self.s = {
-            k: ort.InferenceSession(str(folder / self.m["stages"][k]["file"]), opts, providers=["CPUExecutionProvider"])
-            for k in variants.STAGES
-        }
-        self.enc_names = [o.name for o in self.s["encoder"].get_outputs()]
-
-    def relight(self, image: np.ndarray, source: np.ndarray, target_code: np.ndarray) -> np.ndarray:
-        enc = dict(zip(self.enc_names, self.s["encoder"].run(None, {"image": image})))
-        (code,) = self.s["light_encoder"].run(None, {"light": source})
-        delit = self.s["delight"].run(None, {**{f"e{i}": enc[f"e{i}"] for i in range(1, 8)}, "source_code": code})
-        feed = {**{f"f{i + 1}": d for i, d in enumerate(delit)}, "stem": enc["stem"], "target_code": target_code}
-        return self.s["decoder"].run(None, feed)[0]
-
-    def code(self, light: np.ndarray) -> np.ndarray:
-        return self.s["light_encoder"].run(None, {"light": light})[0]
-
-
 def test_set_accuracy(folder: Path, held: data.Heldout) -> dict[str, float]:
     """RMSE, MS-SSIM and FLIP of a contract model on a 9 x 9 set, source light known."""
-    net = OrtModel(folder, 2)
-    codes = [net.code(held.lights[j][None]) for j in range(held.lights.shape[0])]
+    chain = contract.StageChain(folder, 2)
+    codes = [chain.light_code(held.lights[j][None]) for j in range(held.lights.shape[0])]
 
     def relight(x: np.ndarray, _pose: int, i: int, targets: list[int]) -> np.ndarray:
-        return np.concatenate([net.relight(x[None], held.lights[i][None], codes[j]) for j in targets])
+        return np.concatenate([chain.relight(x[None], held.lights[i][None], codes[j]) for j in targets])
 
-    return metrics.score_test_set(held, net.m["resolution"], relight)
+    return metrics.score_test_set(held, chain.resolution, relight)
 
 
 def time_ort(folder: Path, threads: int, frames: int = 60) -> float:
     """Milliseconds per frame of the network alone in ONNX Runtime (known source light)."""
-    net = OrtModel(folder, threads)
-    r = net.m["resolution"]
+    chain = contract.StageChain(folder, threads)
+    r = chain.resolution
     x = np.random.default_rng(0).random((1, 3, r, r), dtype=np.float32)
     light = np.full((1, 3, 16, 32), 0.5, dtype=np.float32)
-    tcode = net.code(light)
+    tcode = chain.light_code(light)
     for _ in range(5):
-        net.relight(x, light, tcode)
+        chain.relight(x, light, tcode)
     t = time.perf_counter()
     for _ in range(frames):
-        net.relight(x, light, tcode)
+        chain.relight(x, light, tcode)
     return 1e3 * (time.perf_counter() - t) / frames
 
 

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from . import data, losses
+from .. import data, losses
 
 MS_SSIM_WEIGHTS = (0.0448, 0.2856, 0.3001, 0.2363, 0.1333)
 # Thresholds of the adjacent-frame error rates, RMSE on 0-255. The paper's

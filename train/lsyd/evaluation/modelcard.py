@@ -1,6 +1,6 @@
 """Measures a model for its card and writes the card.
 
-    python -m lsyd.modelcard --model models/default --run runs/default --data data
+    python -m lsyd.evaluation.modelcard --model models/default --run runs/default --data data
 
 Measures on the held-out set (9 poses x 9 lights, every ordered pair: 648
 relightings of the paper's 324 pairs) with ONNX Runtime, as the element runs
@@ -21,16 +21,15 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import benchmark, contract, data, metrics
-from .train import TrainConfig, hardware
-
-ROOT = Path(__file__).resolve().parents[2]
+from .. import contract, data
+from ..runs import hardware, read_config
+from . import ROOT, benchmark, metrics
 
 
 def heldout(folder: Path, held: data.Heldout) -> dict:
     """Accuracy with the source light known and predicted, and the prediction's error."""
-    net = benchmark.OrtModel(folder, 2)
-    codes = [net.code(held.lights[j][None]) for j in range(held.lights.shape[0])]
+    chain = contract.StageChain(folder, 2)
+    codes = [chain.light_code(held.lights[j][None]) for j in range(held.lights.shape[0])]
     out = {}
     for mode in ("known", "predicted"):
         monitor_mae: list[float] = []
@@ -45,14 +44,13 @@ def heldout(folder: Path, held: data.Heldout) -> dict:
             mae: list = monitor_mae,
             colours: list = colours,
         ) -> np.ndarray:
-            enc = dict(zip(net.enc_names, net.s["encoder"].run(None, {"image": x[None]})))
-            (pred,) = net.s["light_decoder"].run(None, {k: enc[k] for k in ("e2", "e4", "e6")})
+            pred = chain.predict_light(x[None])
             mae.append(float(np.abs(pred[0] - held.lights[i]).mean()))
             colours.append((pred[0].mean(axis=(1, 2)), held.lights[i].mean(axis=(1, 2))))
             source = held.lights[i][None] if mode == "known" else pred
-            return np.concatenate([net.relight(x[None], source, codes[j]) for j in targets])
+            return np.concatenate([chain.relight(x[None], source, codes[j]) for j in targets])
 
-        out[mode] = metrics.score_test_set(held, net.m["resolution"], relight)
+        out[mode] = metrics.score_test_set(held, chain.resolution, relight)
         if mode == "known":
             out[mode]["monitor_mae"] = float(np.mean(monitor_mae))
             pred, true = (np.array(c) for c in zip(*colours))
@@ -78,7 +76,7 @@ def measure(model: Path, held: data.Heldout, data_root: Path) -> dict:
     m = contract.read(model / "model.json")
     n_pose, n_light = held.images.shape[:2]
     return {
-        "command": f"python -m lsyd.modelcard --model {model.relative_to(ROOT)} --data {data_root.name}",
+        "command": f"python -m lsyd.evaluation.modelcard --model {model.relative_to(ROOT)} --data {data_root.name}",
         "pairs": n_pose * n_light * (n_light - 1) // 2,
         "relightings": n_pose * n_light * (n_light - 1),
         **heldout(model, held),
@@ -139,11 +137,7 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
     h = m["metrics"].get("heldout", {})
     e = m["metrics"].get("element", {})
     p = m["metrics"].get("presence", {})
-    cfg = (
-        TrainConfig.from_json(json.loads((run / "config.json").read_text()))
-        if run and (run / "config.json").exists()
-        else None
-    )
+    cfg = read_config(run) if run and (run / "config.json").exists() else None
     lines = [
         f"# Model card: `{model.name}`",
         "",

@@ -1,6 +1,6 @@
 """Evaluate trained networks the way the paper's Tables 1-3 do, on exact ground truth.
 
-    python -m lsyd.evaluate --data data --out results/paper \\
+    python -m lsyd.evaluation.evaluate --data data --out results/paper \\
         --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
         --no-delight runs/t-nodelight [--no-prediction runs/t-nopred] [--neither runs/t-neither]
 
@@ -29,8 +29,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import data, metrics
-from .train import load_network
+from .. import data
+from ..runs import load_network
+from . import metrics
 
 TABLE2_RECORDINGS = ("steady", "slow", "cuts")
 

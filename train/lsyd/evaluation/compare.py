@@ -1,6 +1,6 @@
 """Compare trained runs on the validation set: what the additions beyond the paper change.
 
-    python -m lsyd.compare --data data --runs runs p-r96 e-r96
+    python -m lsyd.evaluation.compare --data data --runs runs p-r96 e-r96
 
 Each run is exported to ``target/compare/<run>`` and scored with ONNX Runtime on the
 validation set (9 poses x 9 lights, exact ground truth): relighting RMSE with the
@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from . import contract, data, export, losses, modelcard
+from .. import contract, data, export, losses
+from . import ROOT, modelcard
 
-ROOT = Path(__file__).resolve().parents[2]
 # The light pairs of a 9-light set (held-out or validation) that the de-lighting ratio compares.
 DELIGHT_PAIRS = ((0, 5), (2, 3), (0, 8), (4, 6))
 
@@ -28,18 +28,13 @@ def delighting_ratios(folder: Path, held: data.Heldout) -> list[float]:
     """For each pose and light pair: the standardised distance between one face's de-lit
     features under the two lights, each de-lit with its own light, over the distance between
     its raw encoder features (paper section 3.2). Below 1 when de-lighting removes the light."""
-    m = contract.read(folder / "model.json")
-    encoder = contract.open_session(folder / "encoder.onnx")
-    delight = contract.open_session(folder / "delight.onnx")
-    light_encoder = contract.open_session(folder / "light_encoder.onnx")
-    names = [o.name for o in encoder.get_outputs()]
+    chain = contract.StageChain(folder)
 
     def features(pose: int, light: int) -> tuple[list[torch.Tensor], list[torch.Tensor]]:
-        image = data.to_tensor(data.area_resize(held.clean[pose, light], m["resolution"]))[None].numpy()
-        raw = dict(zip(names, encoder.run(None, {"image": image})))
-        (code,) = light_encoder.run(None, {"light": held.lights[light][None]})
-        delit = delight.run(None, {**{f"e{i}": raw[f"e{i}"] for i in range(1, 8)}, "source_code": code})
-        return [torch.from_numpy(raw[f"e{i}"]) for i in range(1, 8)], [torch.from_numpy(d) for d in delit]
+        image = data.to_tensor(data.area_resize(held.clean[pose, light], chain.resolution))[None].numpy()
+        raw = chain.encode(image)
+        delit = chain.delight(raw, chain.light_code(held.lights[light][None]))
+        return [torch.from_numpy(raw[e]) for e in contract.RAW], [torch.from_numpy(d) for d in delit]
 
     ratios = []
     for a, b in DELIGHT_PAIRS:

@@ -1,0 +1,18 @@
+"""Evaluation of trained runs and exported models, each module a command
+(``python -m lsyd.evaluation.<module>``):
+
+- ``evaluate``: the paper's Tables 1-3, in PyTorch, on exact ground truth;
+- ``compare``: runs side by side on the validation set, de-lighting included;
+- ``benchmark``: the model side of the run-time against error benchmark, and its report;
+- ``modelcard``: a model's held-out figures, and its card;
+- ``metrics``: the image and temporal metrics they share, and the one loop that scores
+  a network on a 9 x 9 test set.
+
+Nothing here trains: runs are read through ``lsyd.runs``, exported models through
+``lsyd.contract``.
+"""
+
+from pathlib import Path
+
+# The repository's root: the commands' default paths are under it.
+ROOT = Path(__file__).resolve().parents[3]
