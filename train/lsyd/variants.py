@@ -75,6 +75,10 @@ def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]]) -> None:
             _Reader(calibration[stage]),
             quant_format=QuantFormat.QDQ,
             per_channel=True,
+            # 7-bit weights: x86 CPUs without VNNI (AVX2 only, e.g. many AMD EPYC)
+            # multiply u8 x s8 pairs into saturating 16-bit sums, which 8-bit
+            # per-channel weights overflow (max error 0.18 here, against 0.07 on VNNI).
+            reduce_range=True,
             activation_type=QuantType.QUInt8,
             weight_type=QuantType.QInt8,
         )
