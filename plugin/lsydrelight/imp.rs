@@ -125,9 +125,9 @@ impl LsydRelight {
     /// Forgets the face stream's temporal state: after flushes, seeks, caps changes
     /// and new segments. The monitor frame on screen stays: it is still on screen.
     fn reset_state(&self, why: &str) {
-        if let Some(s) = lock(&self.state).as_mut() {
-            s.policy.reset();
-            s.last_face_rt = None;
+        if let Some(state) = lock(&self.state).as_mut() {
+            state.policy.reset();
+            state.last_face_rt = None;
         }
         gst::debug!(CAT, imp = self, "reset temporal state: {why}");
     }
@@ -138,7 +138,7 @@ impl LsydRelight {
         &self,
         face_rt: Option<gst::ClockTime>,
         deadline: bool,
-        s: &Settings,
+        settings: &Settings,
     ) -> Option<(Source, Option<i64>)> {
         let mut reading = Reading::default();
         let mut track = lock(&self.monitor);
@@ -147,8 +147,8 @@ impl LsydRelight {
                 &pad,
                 face_rt,
                 deadline,
-                s.monitor_offset,
-                s.monitor_timeout,
+                settings.monitor_offset,
+                settings.monitor_timeout,
                 &mut reading,
             ),
             None => Decision::Fallback(Fallback::NoMonitorPad),
@@ -217,14 +217,14 @@ impl LsydRelight {
 
     /// Brings the policy up to date for the next frame: resets after a break in the
     /// stream, new settings, a new target.
-    fn update_state(&self, state: &mut State, buffer: &gst::Buffer, s: &Settings) {
+    fn update_state(&self, state: &mut State, buffer: &gst::Buffer, settings: &Settings) {
         let rt = running_time(&self.face_pad, buffer.pts());
         // A slow stream (1 fps) is not a broken one: a gap counts only beyond a few frames.
         let frame = buffer
             .duration()
             .or_else(|| state.face_info.as_ref().and_then(frame_duration))
             .unwrap_or(gst::ClockTime::ZERO);
-        let gap_limit = s.reset_gap.max(3 * frame);
+        let gap_limit = settings.reset_gap.max(3 * frame);
         let gap = match (state.last_face_rt, rt) {
             (Some(a), Some(b)) => a.nseconds().abs_diff(b.nseconds()) > gap_limit.nseconds(),
             _ => false,
@@ -239,8 +239,8 @@ impl LsydRelight {
             );
         }
         state.last_face_rt = rt.or(state.last_face_rt);
-        state.policy.set_temporal(s.temporal);
-        state.policy.set_skips(s.skips);
+        state.policy.set_temporal(settings.temporal);
+        state.policy.set_skips(settings.skips);
         let newer = lock(&self.target).newer_than(state.target_generation);
         if let Some((light, generation)) = newer {
             match state.policy.set_target(&light) {
@@ -248,7 +248,7 @@ impl LsydRelight {
                     CAT,
                     imp = self,
                     "target light now {}",
-                    s.target_location.display()
+                    settings.target_location.display()
                 ),
                 Err(e) => gst::element_imp_warning!(
                     self,
@@ -275,7 +275,7 @@ impl LsydRelight {
         mut buffer: gst::Buffer,
         source: Source,
         late: bool,
-        s: &Settings,
+        settings: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
         let started = Instant::now();
         self.count(|st| {
@@ -291,13 +291,13 @@ impl LsydRelight {
             .face_info
             .clone()
             .ok_or(gst::FlowError::NotNegotiated)?;
-        self.update_state(state, &buffer, s);
+        self.update_state(state, &buffer, settings);
         let crop = Crop::centred(
             info.width() as usize,
             info.height() as usize,
-            s.crop.x,
-            s.crop.y,
-            s.crop.size,
+            settings.crop.x,
+            settings.crop.y,
+            settings.crop.size,
         );
         let want_prediction = self.monitor_src.is_linked();
         let outcome = {
@@ -321,7 +321,7 @@ impl LsydRelight {
             let mut frame =
                 gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
                     .map_err(|_| gst::FlowError::Error)?;
-            let feather = (s.feather * crop.size as f64).round() as usize;
+            let feather = (settings.feather * crop.size as f64).round() as usize;
             with_frame_mut(&mut frame, |fm| change.apply(fm, crop, feather))
                 .ok_or(gst::FlowError::NotNegotiated)?;
             let paste_seconds = pasting.elapsed().as_secs_f64();
@@ -474,23 +474,28 @@ impl LsydRelight {
         }
     }
 
-    fn start_engine(&self, s: &Settings) -> Result<FramePolicy, gst::ErrorMessage> {
-        let env = engine::environment(&s.ort_library)
+    fn start_engine(&self, settings: &Settings) -> Result<FramePolicy, gst::ErrorMessage> {
+        let env = engine::environment(&settings.ort_library)
             .map_err(|e| gst::error_msg!(gst::LibraryError::Init, ["{}", e]))?;
-        let provider = match s.provider {
+        let provider = match settings.provider {
             ExecutionProvider::Cpu => Provider::Cpu,
             ExecutionProvider::Cuda => Provider::Cuda,
         };
-        let relighter = Relighter::new(env, &s.model_location, s.threads as usize, provider)
-            .map_err(|e| match e {
-                engine::EngineError::Provider(_) => {
-                    gst::error_msg!(gst::LibraryError::Init, ["{}", e])
-                }
-                engine::EngineError::Model(engine::ContractError::Missing(_)) => {
-                    gst::error_msg!(gst::ResourceError::NotFound, ["{}", e])
-                }
-                _ => gst::error_msg!(gst::ResourceError::OpenRead, ["{}", e]),
-            })?;
+        let relighter = Relighter::new(
+            env,
+            &settings.model_location,
+            settings.threads as usize,
+            provider,
+        )
+        .map_err(|e| match e {
+            engine::EngineError::Provider(_) => {
+                gst::error_msg!(gst::LibraryError::Init, ["{}", e])
+            }
+            engine::EngineError::Model(engine::ContractError::Missing(_)) => {
+                gst::error_msg!(gst::ResourceError::NotFound, ["{}", e])
+            }
+            _ => gst::error_msg!(gst::ResourceError::OpenRead, ["{}", e]),
+        })?;
         gst::info!(
             CAT,
             imp = self,
@@ -498,9 +503,13 @@ impl LsydRelight {
             relighter.manifest().name,
             relighter.resolution(),
             relighter.resolution(),
-            s.ort_library.display()
+            settings.ort_library.display()
         );
-        Ok(FramePolicy::new(relighter, s.temporal, s.skips))
+        Ok(FramePolicy::new(
+            relighter,
+            settings.temporal,
+            settings.skips,
+        ))
     }
 }
 
@@ -704,10 +713,10 @@ impl ElementImpl for LsydRelight {
 
 impl AggregatorImpl for LsydRelight {
     fn start(&self) -> Result<(), gst::ErrorMessage> {
-        let s = self.settings();
-        let mut policy = self.start_engine(&s)?;
+        let settings = self.settings();
+        let mut policy = self.start_engine(&settings)?;
         let (target, target_generation) =
-            lock(&self.target).start(&s.target_location).map_err(|e| {
+            lock(&self.target).start(&settings.target_location).map_err(|e| {
                 gst::error_msg!(
                     gst::ResourceError::NotFound,
                     ["{}; set target-location to a PNG image of monitor content (shipped ones are in models/targets)", e]
@@ -807,9 +816,9 @@ impl AggregatorImpl for LsydRelight {
                     );
                     return false;
                 }
-                let changed = lock(&self.state).as_mut().is_some_and(|s| {
-                    let changed = s.face_info.as_ref() != Some(&info);
-                    s.face_info = Some(info.clone());
+                let changed = lock(&self.state).as_mut().is_some_and(|state| {
+                    let changed = state.face_info.as_ref() != Some(&info);
+                    state.face_info = Some(info.clone());
                     changed
                 });
                 self.side.set_fps(info.fps());
@@ -956,9 +965,9 @@ impl AggregatorImpl for LsydRelight {
             self.forward_gap(&face);
             return Ok(gst::FlowSuccess::Ok);
         }
-        let s = self.settings();
+        let settings = self.settings();
         let face_rt = running_time(&self.face_pad, face.pts());
-        let Some((source, monitor_rt)) = self.source_light(face_rt, timeout, &s) else {
+        let Some((source, monitor_rt)) = self.source_light(face_rt, timeout, &settings) else {
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
         };
         let buffer = self
@@ -966,11 +975,11 @@ impl AggregatorImpl for LsydRelight {
             .pop_buffer()
             .ok_or(gst_base::AGGREGATOR_FLOW_NEED_DATA)?;
         let element = self.obj();
-        let late = s.qos
+        let late = settings.qos
             && self
                 .qos
                 .is_late(element.upcast_ref(), face_rt, buffer.duration());
-        let mut out = self.process_frame(buffer, source, late, &s)?;
+        let mut out = self.process_frame(buffer, source, late, &settings)?;
         if late {
             let (relit, reused) = {
                 let st = lock(&self.stats);

@@ -84,7 +84,7 @@ pub fn late_message(
 ) -> gst::Message {
     let stream_time = segment
         .downcast_ref::<gst::ClockTime>()
-        .and_then(|s| s.to_stream_time(buffer.pts()?));
+        .and_then(|time_segment| time_segment.to_stream_time(buffer.pts()?));
     gst::message::Qos::builder(true)
         .running_time(rt)
         .stream_time(stream_time)
