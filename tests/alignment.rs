@@ -2,15 +2,18 @@
 //! `monitor-offset`: at different rates, with offsets, with a monitor stream that
 //! starts late, stalls or ends, non-live and live.
 
-mod support;
-
 use std::thread;
 use std::time::Duration;
 
 use deskstage::math::Vec3;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, monitor_time, stat},
+    init,
+    person::{FACE_H, FACE_W, face_rgb, monitor_rgb},
+    video::{buffer, caps, monitor_buffer, rgb_caps},
+};
 
 /// Expected monitor frame for a face time: the last monitor time at or before face − offset.
 fn expected(monitor_times: &[u64], face: u64, offset: i64) -> Option<u64> {

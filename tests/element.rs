@@ -1,12 +1,18 @@
 //! The element's pads, caps and negotiation for every format, unknown-source
 //! mode, the predicted-monitor output, target changes and state resets.
 
-mod support;
-
 use deskstage::math::Vec3;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, monitor_time, stat},
+    init,
+    person::{FACE_H, FACE_W, face_rgb, render_face},
+    target,
+    video::{
+        FORMATS, FRAME, buffer, caps, frame_time, mean_abs_diff, monitor_buffer, rgb_caps, to_rgb,
+    },
+};
 
 /// A harness on the face pad only: unknown-source mode.
 fn face_harness(format: gst_video::VideoFormat) -> (gst::Element, Harness) {

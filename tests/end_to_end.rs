@@ -1,9 +1,10 @@
 //! A test recording through the element against its exact ground truth: the
 //! error must be the one the model card reports for the shipped model.
 
-mod support;
-
-use support::*;
+use lsydrelight_testkit::{
+    checkout, default_model,
+    recording::{ensure_recording, score_recording},
+};
 
 #[test]
 fn recorded_call_matches_the_model_card() {
@@ -16,9 +17,9 @@ fn recorded_call_matches_the_model_card() {
         "models/default/model.json has no metrics.element.call_90; run the evaluate_element example with --record"
     );
     let dir = checkout().join("target/recordings/call-90");
-    common::ensure_recording(&dir, "call", 90).unwrap();
+    ensure_recording(&dir, "call", 90).unwrap();
     for target in ["studio", "sunset", "left-key"] {
-        let s = common::score_recording(&dir, target, true, &[]).unwrap();
+        let s = score_recording(&dir, target, true, &[]).unwrap();
         let want = card["targets"][target]["rmse_region"].as_f64().unwrap();
         assert_eq!(s.frames, 90);
         assert!(

@@ -2,8 +2,6 @@
 //! checked numerically on the shipped model, unknown-source mode, and the
 //! model contract refusing models that do not match.
 
-mod support;
-
 use std::path::Path;
 
 use gstlsydrelight::engine::{
@@ -11,7 +9,10 @@ use gstlsydrelight::engine::{
 };
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-use support::*;
+use lsydrelight_testkit::{
+    default_model,
+    person::{network_input, render_face},
+};
 
 fn relighter(temporal: Temporal) -> Relighter {
     let env = engine::environment(&paths::default_ort_library())
@@ -23,7 +24,7 @@ fn relighter(temporal: Temporal) -> Relighter {
 }
 
 fn image(r: &Relighter, monitor: deskstage::math::Vec3) -> Vec<f32> {
-    common::network_input(&render_face(monitor), r.resolution())
+    network_input(&render_face(monitor), r.resolution())
 }
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {

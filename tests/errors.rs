@@ -3,10 +3,8 @@
 //! provider that cannot start. (A missing ONNX Runtime library has its own test
 //! binary: one process loads one library.)
 
-mod support;
-
 use gst::prelude::*;
-use support::*;
+use lsydrelight_testkit::{default_model, element::element, init};
 
 /// Starts the element in a pipeline and returns the error message it posts.
 fn start_error(configure: impl FnOnce(&gst::Element)) -> String {

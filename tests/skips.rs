@@ -1,8 +1,6 @@
 //! Scene-adaptive compute: each skip does what it says, is counted, can be
 //! turned off, and keeps the output and the temporal state correct.
 
-mod support;
-
 use deskstage::material::Look;
 use deskstage::math::Vec3;
 use deskstage::monitor::{CellLight, RgbImage};
@@ -10,7 +8,12 @@ use deskstage::render::{Renderer, Scene, Sensor};
 use deskstage::subject::{Pose, State, Subject};
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, stat},
+    person::{FACE_H, FACE_W, face_rgb},
+    target,
+    video::{FRAME, buffer, caps, frame_time, mean_abs_diff, rgb_caps, to_rgb},
+};
 
 fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness, gst::Caps) {
     let e = element();

@@ -2,14 +2,18 @@
 //! repeated or jump about, very low and very high rates, and a model that
 //! produces NaN. Every frame comes out, and nothing broken is ever shown.
 
-mod support;
-
 use std::process::Command;
 
 use deskstage::math::Vec3;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    checkout, default_model,
+    element::{element, stat},
+    person::{FACE_H, FACE_W, face_rgb},
+    target,
+    video::{FRAME, buffer, caps, frame_time, mean_abs_diff, to_rgb},
+};
 
 /// The element, configured, then started by the harness.
 fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness) {

@@ -1,11 +1,9 @@
 //! Running a simulator recording through the real element and scoring it
-//! against the recording's exact ground truth. Shared by the examples and the
-//! end-to-end test (`#[path]`-included), so the model card's element figures and
-//! the test compute the same thing.
+//! against the recording's exact ground truth: the figures `evaluate_element`
+//! records in the model card, the benchmark's, and what `tests/end_to_end.rs`
+//! checks are all computed here.
 
-#![allow(dead_code)]
-
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
 use deskstage::io::Y4mReader;
@@ -13,31 +11,7 @@ use deskstage::monitor::RgbImage;
 use gst::prelude::*;
 use gst_video::prelude::*;
 
-/// The value after `--name` on the command line.
-pub fn flag(name: &str) -> Option<String> {
-    let args: Vec<String> = std::env::args().collect();
-    args.iter()
-        .position(|a| a == name)
-        .and_then(|i| args.get(i + 1))
-        .cloned()
-}
-
-/// Registers the plugin statically (once) so pipelines find `lsydrelight`.
-pub fn init() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(|| {
-        gst::init().expect("GStreamer initialises");
-        gstlsydrelight::plugin_register_static().expect("the plugin registers");
-    });
-}
-
-pub fn checkout() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-pub fn default_model() -> PathBuf {
-    checkout().join("models/default")
-}
+use crate::init;
 
 /// Errors of the whole frame and of the face region, against ground truth.
 #[derive(Clone, Debug, Default, serde::Serialize)]
@@ -63,10 +37,10 @@ pub struct Score {
 
 /// Thresholds of the adjacent-frame error rates, RMSE on 0-255: the same as
 /// `train/lsyd/metrics.py`'s `TEMPORAL_THRESHOLDS`.
-pub const ADJACENT_THRESHOLDS: [f64; 3] = [2.0, 4.0, 8.0];
+const ADJACENT_THRESHOLDS: [f64; 3] = [2.0, 4.0, 8.0];
 
 /// A structure of numbers as JSON.
-pub fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
+fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
     let mut m = serde_json::Map::new();
     for (k, v) in s.iter() {
         let n = v
@@ -250,15 +224,4 @@ pub fn ensure_recording(dir: &Path, name: &str, frames: usize) -> Result<(), Str
     spec.frames = frames;
     let rec = deskstage::dataset::Recording::new(spec)?;
     rec.write(dir).map_err(|e| e.to_string())
-}
-
-/// The network's input for an RGB image: its centred full-height square at `res`.
-pub fn network_input(img: &RgbImage, res: usize) -> Vec<f32> {
-    use gstlsydrelight::frame::{Crop, Frame, sample_crop};
-    let frame = Frame::packed_rgb(&img.data, img.width, img.height);
-    sample_crop(
-        &frame,
-        Crop::centred(img.width, img.height, 0.5, 0.5, 1.0),
-        res,
-    )
 }
