@@ -5,12 +5,13 @@
 use std::process::Command;
 
 use deskstage::math::Vec3;
+use deskstage::subject::State;
 use gst::prelude::*;
 use gst_check::Harness;
 use lsydrelight_testkit::{
     checkout, default_model,
     element::{element, stat},
-    person::{FACE_H, FACE_W, face_rgb},
+    person::{FACE_H, FACE_W, face_rgb, render_person},
     target,
     video::{FRAME, buffer, caps, frame_time, mean_abs_diff, to_rgb},
 };
@@ -34,7 +35,7 @@ fn resolution_change_mid_stream() {
     for (w, ht) in [(320u32, 240u32), (640, 480), (200, 360)] {
         let c = caps(gst_video::VideoFormat::I420, w, ht, 30);
         h.set_src_caps(c.clone());
-        let face = render_face_at(w, ht);
+        let face = render_person(&State::default(), Vec3::new(1.0, 1.0, 1.0), w, ht);
         for i in 0..2 {
             h.push(buffer(&face, &c, frame_time(i), FRAME)).unwrap();
             let out = h.pull().unwrap();
@@ -50,21 +51,6 @@ fn resolution_change_mid_stream() {
         stat(&e, "resets") >= 2,
         "each caps change resets the temporal state"
     );
-}
-
-fn render_face_at(w: u32, h: u32) -> deskstage::monitor::RgbImage {
-    use deskstage::material::Look;
-    use deskstage::monitor::CellLight;
-    use deskstage::render::{Renderer, Scene, Sensor};
-    let r = Renderer::new(Scene::new(
-        deskstage::subject::Subject::default(),
-        w as usize,
-        h as usize,
-    ))
-    .unwrap();
-    let t = r.prepare(&Look::default(), &deskstage::subject::State::default());
-    Sensor::default()
-        .clean(&r.render(&t, &[&CellLight::uniform(16, 32, Vec3::new(1.0, 1.0, 1.0))])[0])
 }
 
 #[test]

@@ -20,15 +20,21 @@ pub fn face_rgb() -> &'static RgbImage {
     FACE.get_or_init(|| render_face(Vec3::new(1.0, 1.0, 1.0)))
 }
 
-/// The person lit by a uniform monitor colour.
+/// The person, frontal, lit by a uniform monitor colour: a 320×240 RGB webcam frame.
 pub fn render_face(monitor: Vec3) -> RgbImage {
+    render_person(&State::default(), monitor, FACE_W, FACE_H)
+}
+
+/// The person in `state` (pose, expression, present or not) lit by a uniform
+/// monitor colour, without sensor noise, at any frame size.
+pub fn render_person(state: &State, monitor: Vec3, width: u32, height: u32) -> RgbImage {
     let r = Renderer::new(Scene::new(
         Subject::default(),
-        FACE_W as usize,
-        FACE_H as usize,
+        width as usize,
+        height as usize,
     ))
     .unwrap();
-    let t = r.prepare(&Look::default(), &State::default());
+    let t = r.prepare(&Look::default(), state);
     let light = CellLight::uniform(16, 32, monitor);
     Sensor::default().clean(&r.render(&t, &[&light])[0])
 }
