@@ -13,15 +13,18 @@
 //! `<out>/element.json`; `python -m lsyd.evaluation.benchmark` adds the held-out accuracy,
 //! the PyTorch peer and the hardware limit, and writes the tables and plot.
 
-#[path = "common/mod.rs"]
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use gst::prelude::*;
+use lsydrelight_testkit::{
+    checkout,
+    flags::flag,
+    init,
+    recording::{ensure_recording, score_recording},
+};
 use serde::{Deserialize, Serialize};
 
 /// One configuration of the element.
@@ -47,7 +50,8 @@ struct RecordingResult {
     input_rmse_region: f64,
     change_rmse: f64,
     adjacent_rmse: f64,
-    /// Share of adjacent frame pairs above each of `common::ADJACENT_THRESHOLDS`.
+    /// Share of adjacent frame pairs above each threshold, as in
+    /// `lsydrelight_testkit::recording::Score::adjacent_over`.
     adjacent_over: Vec<f64>,
     fps: f64,
     stats: serde_json::Value,
@@ -105,12 +109,12 @@ fn peak_rss_mb() -> f64 {
 }
 
 fn recording_dir(name: &str) -> Result<PathBuf, String> {
-    let data = common::checkout().join("data/recordings").join(name);
+    let data = checkout().join("data/recordings").join(name);
     if data.join("truth-sunset.y4m").exists() {
         return Ok(data);
     }
-    let dir = common::checkout().join(format!("target/recordings/{name}-300"));
-    common::ensure_recording(&dir, name, 300)?;
+    let dir = checkout().join(format!("target/recordings/{name}-300"));
+    ensure_recording(&dir, name, 300)?;
     Ok(dir)
 }
 
@@ -161,7 +165,7 @@ fn log_buffer_times(
 }
 
 fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, String> {
-    common::init();
+    init();
     let recording = deskstage::dataset::Recording::standard("call").ok_or("no call recording")?;
     // Rendered beforehand, so the renderer does not compete with the element.
     let shown: Vec<_> = (0..30).map(|i| recording.frame(i, false)).collect();
@@ -312,7 +316,7 @@ fn run_child(v: Variant) -> Result<VariantResult, String> {
             .iter()
             .map(|(k, v)| (k.as_str(), v.as_str()))
             .collect();
-        let s = common::score_recording(&dir, "sunset", true, &refs)?;
+        let s = score_recording(&dir, "sunset", true, &refs)?;
         frames += s.frames;
         recordings.push(RecordingResult {
             recording: name.clone(),
@@ -463,14 +467,14 @@ fn main() -> Result<(), String> {
         println!("{}", serde_json::to_string(&r).unwrap());
         return Ok(());
     }
-    let out = common::flag("--out")
+    let out = flag("--out")
         .map(PathBuf::from)
-        .unwrap_or_else(|| common::checkout().join("results/benchmark"));
+        .unwrap_or_else(|| checkout().join("results/benchmark"));
     let quick = args.iter().any(|a| a == "--quick");
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut results = Vec::new();
-    for v in variants(&common::checkout(), quick) {
+    for v in variants(&checkout(), quick) {
         eprintln!("benchmark: {} ({})", v.name, v.group);
         // A process per variant: its own peak memory and a cold start.
         let output = Command::new(&exe)

@@ -7,25 +7,27 @@
 //!     [--model models/default] [--record]
 //! ```
 
-#[path = "common/mod.rs"]
-mod common;
-
+use lsydrelight_testkit::{
+    checkout, default_model,
+    flags::flag,
+    recording::{ensure_recording, score_recording},
+};
 use std::path::PathBuf;
 
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let recording = common::flag("--recording").unwrap_or_else(|| "call".into());
-    let frames: usize = common::flag("--frames")
+    let recording = flag("--recording").unwrap_or_else(|| "call".into());
+    let frames: usize = flag("--frames")
         .map(|f| f.parse().map_err(|_| "bad --frames"))
         .transpose()?
         .unwrap_or(90);
-    let model = common::flag("--model")
+    let model = flag("--model")
         .map(PathBuf::from)
-        .unwrap_or_else(common::default_model);
+        .unwrap_or_else(default_model);
     let record = args.iter().any(|a| a == "--record");
 
-    let dir = common::checkout().join(format!("target/recordings/{recording}-{frames}"));
-    common::ensure_recording(&dir, &recording, frames)?;
+    let dir = checkout().join(format!("target/recordings/{recording}-{frames}"));
+    ensure_recording(&dir, &recording, frames)?;
     let mut results = serde_json::Map::new();
     println!(
         "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | ms/frame |"
@@ -36,7 +38,7 @@ fn main() -> Result<(), String> {
             "model-location",
             model.to_str().ok_or("model path is not UTF-8")?,
         )];
-        let s = common::score_recording(&dir, target, true, &props)?;
+        let s = score_recording(&dir, target, true, &props)?;
         println!(
             "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |",
             s.frames,

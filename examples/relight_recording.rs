@@ -8,14 +8,12 @@
 //!     [--target models/targets/sunset.png] [--model models/default] [--out results/demo] [--frame 150]
 //! ```
 
-#[path = "common/mod.rs"]
-mod common;
-
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
 use gst::prelude::*;
 use gst_video::prelude::*;
+use lsydrelight_testkit::{checkout, default_model, init};
 
 struct Args {
     face: PathBuf,
@@ -27,12 +25,12 @@ struct Args {
 }
 
 fn parse() -> Result<Args, String> {
-    let root = common::checkout();
+    let root = checkout();
     let mut a = Args {
         face: root.join("examples/data/call/face.mp4"),
         monitor: root.join("examples/data/call/monitor.mp4"),
         target: root.join("models/targets/sunset.png"),
-        model: common::default_model(),
+        model: default_model(),
         out: root.join("results/demo"),
         frame: 150,
     };
@@ -127,7 +125,7 @@ fn write_png(path: &Path, (w, h, data): &(usize, usize, Vec<u8>)) -> Result<(), 
 
 fn main() -> Result<(), String> {
     let a = parse()?;
-    common::init();
+    init();
     std::fs::create_dir_all(&a.out).map_err(|e| format!("{}: {e}", a.out.display()))?;
     let relit = a.out.join("relit.mp4");
     let predicted = a.out.join("predicted-monitor.mp4");

@@ -7,9 +7,6 @@
 //! cargo run --release --example soak -- [--frames 100000] [--model models/default] [--threads 2]
 //! ```
 
-#[path = "common/mod.rs"]
-mod common;
-
 use std::time::Instant;
 
 use deskstage::content::{Clip, Playlist};
@@ -18,6 +15,7 @@ use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Sour
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
+use lsydrelight_testkit::{default_model, flags::flag, person::network_input};
 
 fn rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
@@ -37,12 +35,12 @@ fn rss_mb() -> f64 {
 
 fn main() -> Result<(), String> {
     let frames: usize =
-        common::flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
+        flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
     let threads: usize =
-        common::flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
-    let model = common::flag("--model")
+        flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
+    let model = flag("--model")
         .map(std::path::PathBuf::from)
-        .unwrap_or_else(common::default_model);
+        .unwrap_or_else(default_model);
 
     let env = engine::environment(&paths::default_ort_library()).map_err(|e| e.to_string())?;
     let network = Relighter::new(env, &model, threads, Provider::Cpu).map_err(|e| e.to_string())?;
@@ -57,10 +55,7 @@ fn main() -> Result<(), String> {
         .map(|i| {
             let f = rec.frame(i * 5, false);
             let monitor = Frame::packed_rgb(&f.monitor.data, f.monitor.width, f.monitor.height);
-            (
-                common::network_input(&f.face, res),
-                Light::from_frame(&monitor),
-            )
+            (network_input(&f.face, res), Light::from_frame(&monitor))
         })
         .collect();
     let grey = Playlist::still(Clip::Solid(deskstage::math::Vec3::new(0.7, 0.7, 0.7))).frame(0.0);

@@ -2,15 +2,18 @@
 //! `monitor-offset`: at different rates, with offsets, with a monitor stream that
 //! starts late, stalls or ends, non-live and live.
 
-mod support;
-
 use std::thread;
 use std::time::Duration;
 
 use deskstage::math::Vec3;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, monitor_time, stat},
+    init,
+    person::{FACE_H, FACE_W, face_rgb, monitor_rgb},
+    video::{buffer, caps, monitor_buffer, rgb_caps},
+};
 
 /// Expected monitor frame for a face time: the last monitor time at or before face − offset.
 fn expected(monitor_times: &[u64], face: u64, offset: i64) -> Option<u64> {
@@ -345,5 +348,43 @@ fn live_rates_align_by_running_time() {
     assert!(
         checked > 30,
         "most live frames align with the 60 fps monitor ({checked}/40)"
+    );
+}
+
+#[test]
+fn a_silent_monitor_branch_in_a_non_live_pipeline_is_named() {
+    // A monitor branch that never produces holds a non-live pipeline (the element
+    // waits for the monitor frame that lit each face frame): say so.
+    init();
+    let pipeline = gst::parse::launch(
+        "videotestsrc num-buffers=30 ! video/x-raw,width=160,height=120 \
+         ! lsydrelight name=r monitor-timeout=300000000 ! fakesink \
+         appsrc name=screen is-live=false format=time \
+         caps=video/x-raw,format=RGB,width=64,height=32,framerate=10/1 ! r.monitor_sink",
+    )
+    .unwrap();
+    pipeline.set_state(gst::State::Playing).unwrap();
+    let started = std::time::Instant::now();
+    let msg = pipeline
+        .bus()
+        .unwrap()
+        .timed_pop_filtered(
+            gst::ClockTime::from_seconds(10),
+            &[gst::MessageType::Warning, gst::MessageType::Error],
+        )
+        .expect("a warning, not a silent hang");
+    let waited = started.elapsed();
+    pipeline.set_state(gst::State::Null).unwrap();
+    let gst::MessageView::Warning(w) = msg.view() else {
+        panic!("expected a warning, got {msg:?}");
+    };
+    let text = format!("{} | {:?}", w.error(), w.debug());
+    assert!(
+        text.contains("waiting for the monitor stream") && text.contains("monitor_sink"),
+        "{text}"
+    );
+    assert!(
+        waited >= std::time::Duration::from_millis(300),
+        "warned before monitor-timeout: {waited:?}"
     );
 }

@@ -1,12 +1,18 @@
 //! The element's pads, caps and negotiation for every format, unknown-source
 //! mode, the predicted-monitor output, target changes and state resets.
 
-mod support;
-
 use deskstage::math::Vec3;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, monitor_time, stat},
+    init,
+    person::{FACE_H, FACE_W, face_rgb, render_face},
+    target,
+    video::{
+        FORMATS, FRAME, buffer, caps, frame_time, mean_abs_diff, monitor_buffer, rgb_caps, to_rgb,
+    },
+};
 
 /// A harness on the face pad only: unknown-source mode.
 fn face_harness(format: gst_video::VideoFormat) -> (gst::Element, Harness) {
@@ -371,4 +377,70 @@ fn state_resets_on_flush_discontinuity_caps_and_gaps() {
     let after_caps = to_rgb(&h.pull().unwrap(), &c2);
     assert!(stat(&e, "resets") > before);
     assert!(mean_abs_diff(&after_caps, &first_dim) < 0.05);
+}
+
+/// Counts the buffers and GAP events that reach `pad`.
+fn count_frames(pad: &gst::Pad) -> std::sync::Arc<std::sync::atomic::AtomicUsize> {
+    let count = std::sync::Arc::new(std::sync::atomic::AtomicUsize::new(0));
+    let seen = count.clone();
+    pad.add_probe(
+        gst::PadProbeType::BUFFER | gst::PadProbeType::EVENT_DOWNSTREAM,
+        move |_, info| {
+            let frame = match &info.data {
+                Some(gst::PadProbeData::Buffer(_)) => true,
+                Some(gst::PadProbeData::Event(e)) => e.type_() == gst::EventType::Gap,
+                _ => false,
+            };
+            if frame {
+                seen.fetch_add(1, std::sync::atomic::Ordering::SeqCst);
+            }
+            gst::PadProbeReturn::Ok
+        },
+    );
+    count
+}
+
+#[test]
+fn a_slow_predicted_monitor_branch_gets_every_frame_when_not_live() {
+    // Recording the relit video while the predicted monitor plays at its own pace:
+    // the side branch is slower than the element, and must still get a frame or a
+    // gap for every face frame.
+    init();
+    let frames = 40;
+    let pipeline = gst::parse::launch(&format!(
+        "videotestsrc num-buffers={frames} ! video/x-raw,width=160,height=120,framerate=30/1 \
+         ! lsydrelight name=r  r.src ! queue ! fakesink name=main sync=false \
+         r.monitor_src ! queue max-size-buffers=2 ! identity sleep-time=30000 \
+         ! fakesink name=side sync=false"
+    ))
+    .unwrap()
+    .downcast::<gst::Bin>()
+    .unwrap();
+    let side = pipeline
+        .by_name("side")
+        .unwrap()
+        .static_pad("sink")
+        .unwrap();
+    let main = pipeline
+        .by_name("main")
+        .unwrap()
+        .static_pad("sink")
+        .unwrap();
+    let (side_frames, main_frames) = (count_frames(&side), count_frames(&main));
+    pipeline.set_state(gst::State::Playing).unwrap();
+    let msg = pipeline
+        .bus()
+        .unwrap()
+        .timed_pop_filtered(
+            gst::ClockTime::from_seconds(60),
+            &[gst::MessageType::Error, gst::MessageType::Eos],
+        )
+        .expect("the pipeline ends");
+    let e = pipeline.by_name("r").unwrap();
+    pipeline.set_state(gst::State::Null).unwrap();
+    assert!(matches!(msg.view(), gst::MessageView::Eos(_)), "{msg:?}");
+    let load = std::sync::atomic::Ordering::SeqCst;
+    assert_eq!(main_frames.load(load), frames);
+    assert_eq!(side_frames.load(load), frames, "monitor_src dropped frames");
+    assert_eq!(stat(&e, "monitor-dropped"), 0);
 }

@@ -1,9 +1,27 @@
 //! A test recording through the element against its exact ground truth: the
-//! error must be the one the model card reports for the shipped model.
+//! error must be the one the model card reports for the shipped model, and the
+//! harness that scores it must decode every image the same way.
 
-mod support;
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
 
-use support::*;
+use lsydrelight_testkit::{
+    checkout, default_model,
+    recording::{ensure_recording, score_recording, score_unrelit},
+};
+
+const TARGETS: [&str; 3] = ["studio", "sunset", "left-key"];
+
+/// The first 90 frames of the `call` recording, rendered once for all the tests
+/// (which run in parallel and would otherwise write the same files at once).
+fn call_90() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = checkout().join("target/recordings/call-90");
+        ensure_recording(&dir, "call", 90).unwrap();
+        dir
+    })
+}
 
 #[test]
 fn recorded_call_matches_the_model_card() {
@@ -15,10 +33,8 @@ fn recorded_call_matches_the_model_card() {
         card.is_object(),
         "models/default/model.json has no metrics.element.call_90; run the evaluate_element example with --record"
     );
-    let dir = checkout().join("target/recordings/call-90");
-    common::ensure_recording(&dir, "call", 90).unwrap();
-    for target in ["studio", "sunset", "left-key"] {
-        let s = common::score_recording(&dir, target, true, &[]).unwrap();
+    for target in TARGETS {
+        let s = score_recording(call_90(), target, true, &[]).unwrap();
         let want = card["targets"][target]["rmse_region"].as_f64().unwrap();
         assert_eq!(s.frames, 90);
         assert!(
@@ -26,7 +42,46 @@ fn recorded_call_matches_the_model_card() {
             "{target}: RMSE {:.4} in the face region, the model card says {want:.4}",
             s.rmse_region
         );
+        // The input's error does not depend on the element, only on how the
+        // harness decodes: a card recorded with another decoder differs here.
+        let card_input = card["targets"][target]["input_rmse_region"]
+            .as_f64()
+            .unwrap();
+        assert!(
+            (s.input_rmse_region - card_input).abs() < 1e-9,
+            "{target}: the input's RMSE is {:.4}, the model card's {card_input:.4}: it was \
+             scored another way; re-run the evaluate_element example with --record",
+            s.input_rmse_region
+        );
         // Relighting must do better than leaving the frame as it was.
         assert!(s.rmse_region < s.input_rmse_region, "{target}: {s:?}");
+    }
+}
+
+/// The face video through the pipeline and decoding the element's output takes,
+/// without the element, is scored exactly as the input is: the two paths decode
+/// the same images to the same pixels.
+#[test]
+fn the_harness_decodes_output_input_and_truth_alike() {
+    let face = call_90().join("face.y4m");
+    let itself = score_unrelit(&face, &face).unwrap();
+    assert_eq!(itself.frames, 90);
+    assert_eq!(
+        (
+            itself.rmse_frame,
+            itself.rmse_region,
+            itself.input_rmse_region
+        ),
+        (0.0, 0.0, 0.0),
+        "the face video scored against itself"
+    );
+    for target in TARGETS {
+        let truth = call_90().join(format!("truth-{target}.y4m"));
+        let s = score_unrelit(&face, &truth).unwrap();
+        assert!(s.input_rmse_region > 0.0, "{target}: {s:?}");
+        assert_eq!(
+            s.rmse_region, s.input_rmse_region,
+            "{target}: the unrelit video's RMSE through the output's path and the input's"
+        );
     }
 }

@@ -2,8 +2,6 @@
 //! checked numerically on the shipped model, unknown-source mode, and the
 //! model contract refusing models that do not match.
 
-mod support;
-
 use std::path::Path;
 
 use gstlsydrelight::engine::{
@@ -11,7 +9,10 @@ use gstlsydrelight::engine::{
 };
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-use support::*;
+use lsydrelight_testkit::{
+    default_model,
+    person::{network_input, render_face},
+};
 
 fn relighter(temporal: Temporal) -> FramePolicy {
     let env = engine::environment(&paths::default_ort_library())
@@ -24,7 +25,7 @@ fn relighter(temporal: Temporal) -> FramePolicy {
 }
 
 fn image(r: &FramePolicy, monitor: deskstage::math::Vec3) -> Vec<f32> {
-    common::network_input(&render_face(monitor), r.relighter().resolution())
+    network_input(&render_face(monitor), r.relighter().resolution())
 }
 
 fn max_diff(a: &[f32], b: &[f32]) -> f32 {

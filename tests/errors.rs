@@ -3,10 +3,8 @@
 //! provider that cannot start. (A missing ONNX Runtime library has its own test
 //! binary: one process loads one library.)
 
-mod support;
-
 use gst::prelude::*;
-use support::*;
+use lsydrelight_testkit::{default_model, element::element, init};
 
 /// Starts the element in a pipeline and returns the error message it posts.
 fn start_error(configure: impl FnOnce(&gst::Element)) -> String {
@@ -98,5 +96,33 @@ fn cuda_that_cannot_start_is_an_error_not_a_fallback() {
     assert!(
         m.contains("CUDA") && m.contains("execution-provider=cpu"),
         "{m}"
+    );
+}
+
+#[test]
+fn frames_too_small_after_videoconvert_are_an_error_not_a_hang() {
+    init();
+    let pipeline = gst::parse::launch(
+        "videotestsrc num-buffers=3 ! video/x-raw,width=8,height=8 ! videoconvert \
+         ! lsydrelight ! fakesink",
+    )
+    .unwrap();
+    pipeline.set_state(gst::State::Playing).unwrap();
+    let msg = pipeline
+        .bus()
+        .unwrap()
+        .timed_pop_filtered(
+            gst::ClockTime::from_seconds(20),
+            &[gst::MessageType::Error, gst::MessageType::Eos],
+        )
+        .expect("an error within 20 s, not a pipeline stuck in preroll");
+    pipeline.set_state(gst::State::Null).unwrap();
+    let gst::MessageView::Error(err) = msg.view() else {
+        panic!("expected an error, got {msg:?}");
+    };
+    let text = format!("{} | {:?}", err.error(), err.debug());
+    assert!(
+        text.contains("8x8") && text.contains("at least 16x16"),
+        "{text}"
     );
 }

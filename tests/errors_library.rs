@@ -1,10 +1,8 @@
 //! A missing ONNX Runtime library is an element error naming the path and how
 //! to install it. Its own test binary: a process loads ONNX Runtime once.
 
-mod support;
-
 use gst::prelude::*;
-use support::*;
+use lsydrelight_testkit::init;
 
 #[test]
 fn missing_onnx_runtime_library() {

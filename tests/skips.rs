@@ -1,16 +1,17 @@
 //! Scene-adaptive compute: each skip does what it says, is counted, can be
 //! turned off, and keeps the output and the temporal state correct.
 
-mod support;
-
-use deskstage::material::Look;
 use deskstage::math::Vec3;
-use deskstage::monitor::{CellLight, RgbImage};
-use deskstage::render::{Renderer, Scene, Sensor};
-use deskstage::subject::{Pose, State, Subject};
+use deskstage::monitor::RgbImage;
+use deskstage::subject::{Pose, State};
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    element::{element, stat},
+    person::{FACE_H, FACE_W, face_rgb, render_face, render_person},
+    target,
+    video::{FRAME, buffer, caps, frame_time, mean_abs_diff, rgb_caps, to_rgb},
+};
 
 fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness, gst::Caps) {
     let e = element();
@@ -26,22 +27,11 @@ fn push(h: &mut Harness, c: &gst::Caps, img: &RgbImage, i: u64) -> RgbImage {
     to_rgb(&h.pull().unwrap(), c)
 }
 
-fn render(state: State, monitor: Vec3) -> RgbImage {
-    let r = Renderer::new(Scene::new(
-        Subject::default(),
-        FACE_W as usize,
-        FACE_H as usize,
-    ))
-    .unwrap();
-    let t = r.prepare(&Look::default(), &state);
-    Sensor::default().clean(&r.render(&t, &[&CellLight::uniform(16, 32, monitor)])[0])
-}
-
 #[test]
 fn a_static_scene_reuses_the_relighting_and_keeps_the_state_right() {
     let still = face_rgb();
-    let moved = render(
-        State {
+    let moved = render_person(
+        &State {
             pose: Pose {
                 yaw: 0.2,
                 ..Pose::default()
@@ -49,6 +39,8 @@ fn a_static_scene_reuses_the_relighting_and_keeps_the_state_right() {
             ..State::default()
         },
         Vec3::new(1.0, 1.0, 1.0),
+        FACE_W,
+        FACE_H,
     );
     let run = |skip: bool| {
         let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", skip));
@@ -141,8 +133,8 @@ fn source_equal_to_target_passes_the_frame_through() {
 
 #[test]
 fn nobody_there_means_no_inference_and_a_fresh_start() {
-    let away = render(
-        State {
+    let away = render_person(
+        &State {
             pose: Pose {
                 present: false,
                 ..Pose::default()
@@ -150,6 +142,8 @@ fn nobody_there_means_no_inference_and_a_fresh_start() {
             ..State::default()
         },
         Vec3::new(1.0, 1.0, 1.0),
+        FACE_W,
+        FACE_H,
     );
     let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
     let mut side = Harness::with_element(&e, None, Some("monitor_src"));
@@ -204,7 +198,7 @@ fn late_frames_reuse_the_relighting_and_say_so() {
         Some(frame_time(1)),
     );
     assert!(h.push_upstream_event(qos));
-    let dim = render(State::default(), Vec3::new(0.3, 0.3, 0.3));
+    let dim = render_face(Vec3::new(0.3, 0.3, 0.3));
     for i in 1..4 {
         push(&mut h, &c, &dim, i);
     }
@@ -239,12 +233,7 @@ fn late_frames_reuse_the_relighting_and_say_so() {
 #[test]
 fn only_the_face_region_is_touched() {
     let (w, ht) = (640u32, 480u32);
-    let img = {
-        let r = Renderer::new(Scene::new(Subject::default(), w as usize, ht as usize)).unwrap();
-        let t = r.prepare(&Look::default(), &State::default());
-        Sensor::default()
-            .clean(&r.render(&t, &[&CellLight::uniform(16, 32, Vec3::new(1.0, 1.0, 1.0))])[0])
-    };
+    let img = render_person(&State::default(), Vec3::new(1.0, 1.0, 1.0), w, ht);
     for format in [gst_video::VideoFormat::I420, gst_video::VideoFormat::Bgrx] {
         let e = element();
         e.set_property("crop-size", 0.5f64);

@@ -2,13 +2,14 @@
 //! inputs, target equal to source, and determinism. (`cargo run --release
 //! --example soak` runs the long version: 100,000 frames.)
 
-mod support;
-
 use deskstage::math::Vec3;
 use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-use support::*;
+use lsydrelight_testkit::{
+    default_model,
+    person::{face_rgb, network_input, render_face},
+};
 
 fn relighter(threads: usize) -> FramePolicy {
     let env = engine::environment(&paths::default_ort_library())
@@ -56,7 +57,7 @@ fn long_runs_stay_finite_flat_and_without_drift() {
         Vec3::new(0.9, 0.5, 0.1),
     ]
     .iter()
-    .map(|&m| common::network_input(&render_face(m), res))
+    .map(|&m| network_input(&render_face(m), res))
     .collect();
     let lights = [
         Light::uniform([1.0; 3]),
@@ -147,7 +148,7 @@ fn extreme_faces_and_flat_regions_stay_finite() {
 #[test]
 fn strobing_monitor_stays_bounded() {
     let mut r = relighter(2);
-    let face = common::network_input(face_rgb(), r.relighter().resolution());
+    let face = network_input(face_rgb(), r.relighter().resolution());
     let (black, white) = (Light::uniform([0.0; 3]), Light::uniform([1.0; 3]));
     let mut previous: Option<Vec<f32>> = None;
     let mut biggest_step = 0.0f32;
@@ -185,7 +186,7 @@ fn target_equal_to_source_changes_little() {
     let mut r = relighter(2);
     let res = r.relighter().resolution();
     let light = Light::uniform([0.8, 0.8, 0.8]);
-    let face = common::network_input(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
+    let face = network_input(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
     r.set_target(&light).unwrap();
     let same = r
         .relight(&face, Source::Known(light.clone()), false)
@@ -216,8 +217,8 @@ fn identical_input_gives_identical_output() {
         let mut r = relighter(threads);
         let res = r.relighter().resolution();
         let faces = [
-            common::network_input(face_rgb(), res),
-            common::network_input(&render_face(Vec3::new(0.3, 0.3, 0.8)), res),
+            network_input(face_rgb(), res),
+            network_input(&render_face(Vec3::new(0.3, 0.3, 0.8)), res),
         ];
         (0..6)
             .map(|i| {

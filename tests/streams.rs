@@ -2,14 +2,19 @@
 //! repeated or jump about, very low and very high rates, and a model that
 //! produces NaN. Every frame comes out, and nothing broken is ever shown.
 
-mod support;
-
 use std::process::Command;
 
 use deskstage::math::Vec3;
+use deskstage::subject::State;
 use gst::prelude::*;
 use gst_check::Harness;
-use support::*;
+use lsydrelight_testkit::{
+    checkout, default_model,
+    element::{element, stat},
+    person::{FACE_H, FACE_W, face_rgb, render_person},
+    target,
+    video::{FRAME, buffer, caps, frame_time, mean_abs_diff, to_rgb},
+};
 
 /// The element, configured, then started by the harness.
 fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness) {
@@ -30,7 +35,7 @@ fn resolution_change_mid_stream() {
     for (w, ht) in [(320u32, 240u32), (640, 480), (200, 360)] {
         let c = caps(gst_video::VideoFormat::I420, w, ht, 30);
         h.set_src_caps(c.clone());
-        let face = render_face_at(w, ht);
+        let face = render_person(&State::default(), Vec3::new(1.0, 1.0, 1.0), w, ht);
         for i in 0..2 {
             h.push(buffer(&face, &c, frame_time(i), FRAME)).unwrap();
             let out = h.pull().unwrap();
@@ -46,21 +51,6 @@ fn resolution_change_mid_stream() {
         stat(&e, "resets") >= 2,
         "each caps change resets the temporal state"
     );
-}
-
-fn render_face_at(w: u32, h: u32) -> deskstage::monitor::RgbImage {
-    use deskstage::material::Look;
-    use deskstage::monitor::CellLight;
-    use deskstage::render::{Renderer, Scene, Sensor};
-    let r = Renderer::new(Scene::new(
-        deskstage::subject::Subject::default(),
-        w as usize,
-        h as usize,
-    ))
-    .unwrap();
-    let t = r.prepare(&Look::default(), &deskstage::subject::State::default());
-    Sensor::default()
-        .clean(&r.render(&t, &[&CellLight::uniform(16, 32, Vec3::new(1.0, 1.0, 1.0))])[0])
 }
 
 #[test]
@@ -199,4 +189,37 @@ fn gaps_pass_through_as_gaps() {
     let gap = std::iter::from_fn(|| h.try_pull_event()).find(|e| e.type_() == gst::EventType::Gap);
     assert!(gap.is_some(), "the gap reaches downstream");
     assert_eq!(stat(&e, "relit"), 2);
+}
+
+#[test]
+fn black_frames_stay_black() {
+    // Camera start-up, fades and cuts to black: a frame that carries no light must
+    // not come out with the network's idea of the face drawn into it.
+    for format in [gst_video::VideoFormat::I420, gst_video::VideoFormat::Rgb] {
+        let (e, mut h) = harness();
+        let c = caps(format, FACE_W, FACE_H, 30);
+        h.set_src_caps(c.clone());
+        let info = gst_video::VideoInfo::from_caps(&c).unwrap();
+        // Relight a face first, so the element has state a black frame must not reuse.
+        h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+            .unwrap();
+        h.pull().unwrap();
+        let black = deskstage::monitor::RgbImage {
+            width: FACE_W as usize,
+            height: FACE_H as usize,
+            data: vec![0; (FACE_W * FACE_H * 3) as usize],
+        };
+        for i in 1..4 {
+            let input = buffer(&black, &c, frame_time(i), FRAME);
+            let expected = input.map_readable().unwrap().to_vec();
+            h.push(input).unwrap();
+            let out = h.pull().unwrap();
+            assert_eq!(
+                out.map_readable().unwrap().as_slice(),
+                &expected[..info.size()],
+                "{format:?}: black frame {i} changed"
+            );
+        }
+        assert_eq!(stat(&e, "skipped-dark"), 3, "{format:?}");
+    }
 }

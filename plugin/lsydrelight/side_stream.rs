@@ -133,8 +133,13 @@ impl SideStream {
             .push_back(Item::Event(gst::event::StreamStart::new(&id)));
         q.items
             .push_back(Item::Event(gst::event::Caps::new(&caps(fps))));
+        // Before the face stream's own segment (an empty stream), a time segment from 0.
+        let segment = match segment.format() {
+            gst::Format::Time => segment.clone(),
+            _ => gst::FormattedSegment::<gst::ClockTime>::new().upcast(),
+        };
         q.items
-            .push_back(Item::Event(gst::event::Segment::new(segment)));
+            .push_back(Item::Event(gst::event::Segment::new(&segment)));
         q.started = true;
         self.cond.notify_all();
     }

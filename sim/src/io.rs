@@ -196,7 +196,8 @@ fn to_u8(v: f32) -> u8 {
     v.round().clamp(0.0, 255.0) as u8
 }
 
-/// Writes RGB frames as a YUV4MPEG2 video (BT.601, limited range).
+/// Writes RGB frames as a YUV4MPEG2 video (BT.601, limited range; 4:2:0 chroma is
+/// the mean of each 2×2 block, sited at its centre as `C420jpeg` says).
 pub struct Y4mWriter {
     out: BufWriter<File>,
     width: usize,
@@ -220,7 +221,16 @@ impl Y4mWriter {
             Chroma::C420 => "420jpeg",
             Chroma::C444 => "444",
         };
-        writeln!(out, "YUV4MPEG2 W{width} H{height} F{fps}:1 Ip A1:1 C{c}")?;
+        // XCOLORRANGE is the one colour tag YUV4MPEG2 readers know (FFmpeg's); it has
+        // none for the matrix. GStreamer 1.22's y4mdec reads neither it nor the chroma
+        // siting of `C`: it takes frames over 576 lines as BT.709 with MPEG-2 siting,
+        // so pipelines that read these files with it set
+        // `colorimetry=bt601,chroma-site=jpeg` themselves (as the element's test
+        // harness does, `tests/support/src/recording.rs`).
+        writeln!(
+            out,
+            "YUV4MPEG2 W{width} H{height} F{fps}:1 Ip A1:1 C{c} XCOLORRANGE=LIMITED"
+        )?;
         Ok(Self {
             out,
             width,
@@ -275,6 +285,34 @@ impl Y4mWriter {
     pub fn finish(mut self) -> io::Result<()> {
         self.out.flush()
     }
+}
+
+/// A frame's Y'CbCr planes (BT.601, limited range, as [`Y4mWriter`] writes them)
+/// to RGB: each chroma sample is used for every pixel it was averaged from. The
+/// one decoder of [`Y4mReader`] and of anything whose figures are compared with
+/// frames it read.
+pub fn ycbcr_planes_to_rgb(
+    y: &[u8],
+    cb: &[u8],
+    cr: &[u8],
+    width: usize,
+    height: usize,
+    chroma: Chroma,
+) -> RgbImage {
+    let (w, h) = (width, height);
+    let (cw, ch) = match chroma {
+        Chroma::C420 => (w / 2, h / 2),
+        Chroma::C444 => (w, h),
+    };
+    let mut img = RgbImage::new(w, h);
+    for yy in 0..h {
+        for xx in 0..w {
+            let ci = (yy * ch / h) * cw + xx * cw / w;
+            let rgb = ycbcr_to_rgb(y[yy * w + xx], cb[ci], cr[ci]);
+            img.data[(yy * w + xx) * 3..(yy * w + xx) * 3 + 3].copy_from_slice(&rgb);
+        }
+    }
+    img
 }
 
 /// Reads the frames of a `.y4m` video written by [`Y4mWriter`] back to RGB.
@@ -344,15 +382,7 @@ impl Y4mReader {
         self.input.read_exact(&mut y)?;
         self.input.read_exact(&mut u)?;
         self.input.read_exact(&mut v)?;
-        let mut img = RgbImage::new(w, h);
-        for yy in 0..h {
-            for xx in 0..w {
-                let ci = (yy * ch / h) * cw + xx * cw / w;
-                let rgb = ycbcr_to_rgb(y[yy * w + xx], u[ci], v[ci]);
-                img.data[(yy * w + xx) * 3..(yy * w + xx) * 3 + 3].copy_from_slice(&rgb);
-            }
-        }
-        Ok(Some(img))
+        Ok(Some(ycbcr_planes_to_rgb(&y, &u, &v, w, h, self.chroma)))
     }
 }
 
@@ -370,6 +400,47 @@ mod tests {
         let (shape, back) = read_npy::<f32>(&p).unwrap();
         assert_eq!(shape, vec![2, 3, 4]);
         assert_eq!(back, v);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn y4m_round_trip_states_limited_range() {
+        let dir = std::env::temp_dir().join(format!("deskstage-y4m-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("a.y4m");
+        // Uniform 2x2 blocks, so 4:2:0 loses nothing but rounding.
+        let mut img = RgbImage::new(8, 4);
+        for y in 0..4 {
+            for x in 0..8 {
+                let i = (y * 8 + x) * 3;
+                let block = (y / 2 * 4 + x / 2) as u8;
+                img.data[i..i + 3].copy_from_slice(&[block * 30, 255 - block * 20, 60 + block]);
+            }
+        }
+        let mut w = Y4mWriter::create(&p, 8, 4, 30, Chroma::C420).unwrap();
+        w.write(&img).unwrap();
+        w.finish().unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let header = String::from_utf8_lossy(bytes.split(|&b| b == b'\n').next().unwrap());
+        assert_eq!(
+            header,
+            "YUV4MPEG2 W8 H4 F30:1 Ip A1:1 C420jpeg XCOLORRANGE=LIMITED"
+        );
+        let mut r = Y4mReader::open(&p).unwrap();
+        assert_eq!(
+            (r.width, r.height, r.fps, r.chroma),
+            (8, 4, 30, Chroma::C420)
+        );
+        let back = r.next_frame().unwrap().unwrap();
+        for (a, b) in back.data.iter().zip(&img.data) {
+            assert!(
+                (*a as i32 - *b as i32).abs() <= 2,
+                "{:?} vs {:?}",
+                back.data,
+                img.data
+            );
+        }
+        assert!(r.next_frame().unwrap().is_none());
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -1,25 +1,14 @@
-//! Helpers of the element tests: frames of the synthetic person in any format,
-//! monitor frames, and reading what the element reports.
+//! Frames in and out of the element: caps, RGB images as buffers of any format
+//! the element takes (converted by GStreamer's own converter) and back, and
+//! frame times.
 
-#![allow(dead_code)]
-
-use std::sync::OnceLock;
-
-use deskstage::content::{Clip, Playlist};
-use deskstage::material::Look;
 use deskstage::math::Vec3;
-use deskstage::monitor::{CellLight, RgbImage};
-use deskstage::render::{Renderer, Scene, Sensor};
-use deskstage::subject::{State, Subject};
-use gst::prelude::*;
+use deskstage::monitor::RgbImage;
 use gst_video::prelude::*;
 
-#[path = "../../examples/common/mod.rs"]
-pub mod common;
+use crate::person::monitor_rgb;
 
-#[allow(unused_imports)]
-pub use common::{checkout, default_model, init};
-
+/// Every format the element's `sink` takes.
 pub const FORMATS: [gst_video::VideoFormat; 9] = [
     gst_video::VideoFormat::I420,
     gst_video::VideoFormat::Nv12,
@@ -32,37 +21,15 @@ pub const FORMATS: [gst_video::VideoFormat; 9] = [
     gst_video::VideoFormat::Bgr,
 ];
 
-pub const FACE_W: u32 = 320;
-pub const FACE_H: u32 = 240;
+/// One frame's duration at 30 fps.
+pub const FRAME: gst::ClockTime = gst::ClockTime::from_nseconds(33_333_333);
 
-/// The default person, frontal, lit by a white monitor: a 320×240 RGB webcam frame.
-pub fn face_rgb() -> &'static RgbImage {
-    static FACE: OnceLock<RgbImage> = OnceLock::new();
-    FACE.get_or_init(|| render_face(Vec3::new(1.0, 1.0, 1.0)))
+/// The time of frame `i` at 30 fps.
+pub fn frame_time(i: u64) -> gst::ClockTime {
+    gst::ClockTime::from_nseconds(i * 1_000_000_000 / 30)
 }
 
-/// The person lit by a uniform monitor colour.
-pub fn render_face(monitor: Vec3) -> RgbImage {
-    let r = Renderer::new(Scene::new(
-        Subject::default(),
-        FACE_W as usize,
-        FACE_H as usize,
-    ))
-    .unwrap();
-    let t = r.prepare(&Look::default(), &State::default());
-    let light = CellLight::uniform(16, 32, monitor);
-    Sensor::default().clean(&r.render(&t, &[&light])[0])
-}
-
-pub fn rgb_caps(w: u32, h: u32, fps: i32) -> gst::Caps {
-    gst_video::VideoCapsBuilder::new()
-        .format(gst_video::VideoFormat::Rgb)
-        .width(w as i32)
-        .height(h as i32)
-        .framerate(gst::Fraction::new(fps, 1))
-        .build()
-}
-
+/// Raw video caps of a format, size and rate.
 pub fn caps(format: gst_video::VideoFormat, w: u32, h: u32, fps: i32) -> gst::Caps {
     gst_video::VideoCapsBuilder::new()
         .format(format)
@@ -70,6 +37,11 @@ pub fn caps(format: gst_video::VideoFormat, w: u32, h: u32, fps: i32) -> gst::Ca
         .height(h as i32)
         .framerate(gst::Fraction::new(fps, 1))
         .build()
+}
+
+/// Packed RGB caps of a size and rate.
+pub fn rgb_caps(w: u32, h: u32, fps: i32) -> gst::Caps {
+    caps(gst_video::VideoFormat::Rgb, w, h, fps)
 }
 
 fn rgb_buffer(img: &RgbImage) -> gst::Buffer {
@@ -152,11 +124,7 @@ pub fn to_rgb(buffer: &gst::Buffer, caps: &gst::Caps) -> RgbImage {
     img
 }
 
-/// A monitor frame of one colour.
-pub fn monitor_rgb(colour: Vec3) -> RgbImage {
-    Playlist::still(Clip::Solid(colour)).frame(0.0)
-}
-
+/// A 30 fps monitor frame of one colour, as an RGB buffer stamped at `pts`.
 pub fn monitor_buffer(colour: Vec3, pts: gst::ClockTime, duration: gst::ClockTime) -> gst::Buffer {
     let img = monitor_rgb(colour);
     buffer(
@@ -167,25 +135,7 @@ pub fn monitor_buffer(colour: Vec3, pts: gst::ClockTime, duration: gst::ClockTim
     )
 }
 
-/// Running time of the monitor frame that lit `buffer`, from its reference-timestamp meta.
-pub fn monitor_time(buffer: &gst::BufferRef) -> Option<gst::ClockTime> {
-    buffer
-        .iter_meta::<gst::ReferenceTimestampMeta>()
-        .find(|m| {
-            m.reference()
-                .can_intersect(&gstlsydrelight::lsydrelight::MONITOR_TIMESTAMP_CAPS)
-        })
-        .map(|m| m.timestamp())
-}
-
-pub fn stat(element: &gst::Element, field: &str) -> u64 {
-    element
-        .property::<gst::Structure>("stats")
-        .get::<u64>(field)
-        .unwrap()
-}
-
-/// Mean absolute difference of two images over a region.
+/// Mean absolute difference of two images of the same size, on 0-255.
 pub fn mean_abs_diff(a: &RgbImage, b: &RgbImage) -> f64 {
     a.data
         .iter()
@@ -193,24 +143,4 @@ pub fn mean_abs_diff(a: &RgbImage, b: &RgbImage) -> f64 {
         .map(|(x, y)| (*x as f64 - *y as f64).abs())
         .sum::<f64>()
         / a.data.len() as f64
-}
-
-pub fn element() -> gst::Element {
-    init();
-    gst::ElementFactory::make("lsydrelight")
-        .build()
-        .expect("lsydrelight element")
-}
-
-pub fn target(name: &str) -> String {
-    checkout()
-        .join(format!("models/targets/{name}.png"))
-        .to_string_lossy()
-        .into_owned()
-}
-
-pub const FRAME: gst::ClockTime = gst::ClockTime::from_nseconds(33_333_333);
-
-pub fn frame_time(i: u64) -> gst::ClockTime {
-    gst::ClockTime::from_nseconds(i * 1_000_000_000 / 30)
 }

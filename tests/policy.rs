@@ -1,0 +1,160 @@
+//! The per-frame policy without GStreamer: which frames are relit, reused or
+//! passed through, and what each leaves of the stream's state.
+
+use deskstage::monitor::RgbImage;
+use gstlsydrelight::engine::{
+    self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Reuse, Skips,
+    Source, Temporal,
+};
+use gstlsydrelight::frame::{Crop, Frame};
+use gstlsydrelight::light::Light;
+use gstlsydrelight::paths;
+use lsydrelight_testkit::{default_model, person::face_rgb};
+
+fn target() -> Light {
+    Light::uniform([0.8, 0.6, 0.4])
+}
+
+fn policy(skips: Skips) -> FramePolicy {
+    let env = engine::environment(&paths::default_ort_library())
+        .expect("ONNX Runtime loads (run scripts/setup.sh)");
+    let network =
+        Relighter::new(env, &default_model(), 1, Provider::Cpu).expect("the shipped model loads");
+    let mut p = FramePolicy::new(network, Temporal::default(), skips);
+    p.set_target(&target()).unwrap();
+    p
+}
+
+/// What the policy does with `image` as a face frame; its change, if any, as bytes
+/// pasted onto a copy of the frame.
+fn run(
+    p: &mut FramePolicy,
+    image: &RgbImage,
+    source: Source,
+    late: bool,
+) -> (Action, Option<Vec<u8>>) {
+    let (w, h) = (image.width, image.height);
+    let frame = Frame::packed_rgb(&image.data, w, h);
+    let crop = Crop::centred(w, h, 0.5, 0.5, 1.0);
+    let outcome = p
+        .process(FrameRequest {
+            frame: &frame,
+            crop,
+            source,
+            late,
+            want_prediction: false,
+        })
+        .unwrap();
+    let pasted = outcome.change.map(|change| {
+        let mut out = image.data.clone();
+        let mut fm = gstlsydrelight::frame::FrameMut {
+            format: frame.format,
+            width: w,
+            height: h,
+            planes: [
+                (&mut out[..], w * 3),
+                (Default::default(), 0),
+                (Default::default(), 0),
+            ],
+            matrix: frame.matrix,
+        };
+        change.apply(&mut fm, crop, 0);
+        out
+    });
+    (outcome.action, pasted)
+}
+
+fn solid(like: &RgbImage, level: u8) -> RgbImage {
+    RgbImage {
+        width: like.width,
+        height: like.height,
+        data: vec![level; like.data.len()],
+    }
+}
+
+fn white_monitor() -> Source {
+    Source::Known(Light::uniform([1.0; 3]))
+}
+
+#[test]
+fn black_and_nearly_black_frames_pass_through_and_forget_the_past() {
+    let mut p = policy(Skips::default());
+    let face = face_rgb();
+    assert_eq!(run(&mut p, face, white_monitor(), false).0, Action::Relit);
+    for level in [0, 3] {
+        let (action, change) = run(&mut p, &solid(face, level), white_monitor(), false);
+        assert_eq!(
+            action,
+            Action::PassedThrough(PassThrough::Dark),
+            "level {level}"
+        );
+        assert!(change.is_none(), "a dark frame is left as it is");
+    }
+    // The stream's state was forgotten once, at the first dark frame.
+    assert_eq!(p.counts().resets, 1);
+    assert_eq!(p.counts().passed_dark, 2);
+    // The next frame starts afresh: the same as a new stream's first frame.
+    let after = run(&mut p, face, white_monitor(), false).1.unwrap();
+    let fresh = run(&mut policy(Skips::default()), face, white_monitor(), false)
+        .1
+        .unwrap();
+    assert_eq!(after, fresh);
+}
+
+#[test]
+fn late_frames_reuse_the_last_relighting_once_there_is_one() {
+    let mut p = policy(Skips::default());
+    let face = face_rgb();
+    // Nothing to reuse yet: even a late frame is relit.
+    let (first, relit) = run(&mut p, face, white_monitor(), true);
+    assert_eq!(first, Action::Relit);
+    let (late, reused) = run(&mut p, face, white_monitor(), true);
+    assert_eq!(late, Action::Reused(Reuse::Late));
+    assert_eq!(reused, relit, "the reused change is the last one");
+    assert_eq!(p.counts().reused_late, 1);
+    assert_eq!(p.counts().relit, 1);
+}
+
+#[test]
+fn a_source_light_equal_to_the_target_passes_through() {
+    let mut p = policy(Skips::default());
+    let (action, change) = run(&mut p, face_rgb(), Source::Known(target()), false);
+    assert_eq!(action, Action::PassedThrough(PassThrough::SameLight));
+    assert!(change.is_none());
+    let mut always = policy(Skips {
+        skip_same_light: false,
+        ..Skips::default()
+    });
+    assert_eq!(
+        run(&mut always, face_rgb(), Source::Known(target()), false).0,
+        Action::Relit
+    );
+}
+
+#[test]
+fn only_a_reset_that_forgets_something_counts() {
+    let mut p = policy(Skips::default());
+    assert!(!p.reset(), "a new stream has nothing to forget");
+    run(&mut p, face_rgb(), Source::Unknown, false);
+    assert!(p.reset());
+    assert!(!p.reset());
+    assert_eq!(p.counts().resets, 1);
+    assert!(p.smoothed_features().is_none());
+}
+
+#[test]
+fn the_static_skip_reuses_only_what_barely_changed() {
+    let mut p = policy(Skips {
+        skip_static: true,
+        ..Skips::default()
+    });
+    let face = face_rgb();
+    assert_eq!(run(&mut p, face, white_monitor(), false).0, Action::Relit);
+    assert_eq!(
+        run(&mut p, face, white_monitor(), false).0,
+        Action::Reused(Reuse::Static)
+    );
+    // Another light is not a static scene.
+    let blue = Source::Known(Light::uniform([0.1, 0.1, 0.9]));
+    assert_eq!(run(&mut p, face, blue, false).0, Action::Relit);
+}

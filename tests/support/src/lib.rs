@@ -1,0 +1,54 @@
+//! Helpers shared by lsydrelight's tests (`tests/`) and examples (`examples/`),
+//! a dev-dependency of the plugin crate:
+//!
+//! - [`person`]: frames of the simulated person and their monitor, and the
+//!   network's input made from them;
+//! - [`video`]: caps and buffers of those frames in every format the element
+//!   takes, and back;
+//! - [`element`]: the element, and reading what it reports;
+//! - [`recording`]: a simulator recording run through the element and scored
+//!   against its exact ground truth;
+//! - [`flags`]: the examples' command-line flags.
+//!
+//! The checkout's paths and registering the plugin are here at the top.
+
+use std::path::{Path, PathBuf};
+
+pub mod element;
+pub mod flags;
+pub mod person;
+pub mod recording;
+pub mod video;
+
+/// Registers the plugin statically (once) so pipelines find `lsydrelight`.
+pub fn init() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        gst::init().expect("GStreamer initialises");
+        gstlsydrelight::plugin_register_static().expect("the plugin registers");
+    });
+}
+
+/// The checkout: where the shipped models, targets and `target/` are.
+pub fn checkout() -> PathBuf {
+    // This crate is `tests/support/` of the checkout.
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .ancestors()
+        .nth(2)
+        .expect("tests/support has two parents")
+        .to_path_buf()
+}
+
+/// The shipped model, `models/default`.
+pub fn default_model() -> PathBuf {
+    checkout().join("models/default")
+}
+
+/// The shipped target light `models/targets/<name>.png`, as the string the
+/// element's `target-location` takes.
+pub fn target(name: &str) -> String {
+    checkout()
+        .join(format!("models/targets/{name}.png"))
+        .to_string_lossy()
+        .into_owned()
+}

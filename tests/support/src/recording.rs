@@ -1,0 +1,375 @@
+//! Running a simulator recording through the real element and scoring it
+//! against the recording's exact ground truth: the figures `evaluate_element`
+//! records in the model card, the benchmark's, and what `tests/end_to_end.rs`
+//! checks are all computed here.
+//!
+//! Every image scored, the element's output as much as its input and the
+//! ground truth, is decoded to RGB by one decoder, `deskstage`'s
+//! ([`ycbcr_planes_to_rgb`], the exact inverse of the simulator's writer and
+//! the same as the trainer's `read_y4m`): the element's output is taken as the
+//! Y'CbCr planes it wrote, never through `videoconvert`, whose 8-bit path maps
+//! Y = 235 to 253 where deskstage's gives 255 and so moved the figures with no
+//! change in the element.
+
+use std::path::Path;
+use std::time::Instant;
+
+use deskstage::io::{Chroma, Y4mReader, ycbcr_planes_to_rgb};
+use deskstage::monitor::RgbImage;
+use gst::prelude::*;
+use gst_video::prelude::*;
+
+use crate::init;
+
+/// Errors of the whole frame and of the face region, against ground truth.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Score {
+    pub frames: usize,
+    /// RMSE on 0-255 over the element's face region (the centred square).
+    pub rmse_region: f64,
+    /// RMSE on 0-255 over the whole frame.
+    pub rmse_frame: f64,
+    /// The same for the unrelit input: how much relighting had to change.
+    pub input_rmse_region: f64,
+    /// Adjacent-frame RMSE of the output, and of the change against the ground truth's change.
+    pub adjacent_rmse: f64,
+    pub change_rmse: f64,
+    /// Share of adjacent frame pairs whose RMSE exceeds each of `ADJACENT_THRESHOLDS`
+    /// (the paper's error rates).
+    pub adjacent_over: Vec<f64>,
+    /// Per-frame processing time of the pipeline, wall clock.
+    pub ms_per_frame: f64,
+    /// The element's `stats` at the end.
+    pub stats: serde_json::Value,
+}
+
+/// Thresholds of the adjacent-frame error rates, RMSE on 0-255: the same as
+/// `train/lsyd/evaluation/metrics.py`'s `TEMPORAL_THRESHOLDS`.
+const ADJACENT_THRESHOLDS: [f64; 3] = [2.0, 4.0, 8.0];
+
+/// A structure of numbers as JSON.
+fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
+    let mut m = serde_json::Map::new();
+    for (k, v) in s.iter() {
+        let n = v
+            .get::<u64>()
+            .map(serde_json::Value::from)
+            .or_else(|_| v.get::<f64>().map(serde_json::Value::from))
+            .unwrap_or(serde_json::Value::Null);
+        m.insert(k.to_string(), n);
+    }
+    serde_json::Value::Object(m)
+}
+
+fn sq_err(a: &RgbImage, b: &RgbImage, region: Option<(usize, usize, usize)>) -> (f64, usize) {
+    let (x0, y0, size) = region.unwrap_or((0, 0, usize::MAX));
+    let mut sum = 0.0;
+    let mut n = 0;
+    for y in y0..(y0 + size).min(a.height) {
+        for x in x0..(x0 + size).min(a.width) {
+            let i = (y * a.width + x) * 3;
+            for c in 0..3 {
+                let d = a.data[i + c] as f64 - b.data[i + c] as f64;
+                sum += d * d;
+            }
+            n += 3;
+        }
+    }
+    (sum, n)
+}
+
+/// What GStreamer should be told of deskstage's `.y4m` files: BT.601, limited
+/// range, 4:2:0 chroma sited at the centre of each 2x2 block it averages. Their
+/// header says `C420jpeg XCOLORRANGE=LIMITED`, but GStreamer 1.22's `y4mdec` reads
+/// no colour tag nor the siting: it takes frames over 576 lines as BT.709 with
+/// MPEG-2 siting, which the element would then decode with the wrong matrix.
+const DESKSTAGE_Y4M: &str = "video/x-raw,colorimetry=bt601,chroma-site=jpeg";
+
+/// A pipeline fragment that plays a deskstage `.y4m` file with its true colorimetry.
+fn play_y4m(path: &Path) -> String {
+    format!(
+        "filesrc location=\"{}\" ! y4mdec ! capssetter caps=\"{DESKSTAGE_Y4M}\"",
+        path.display()
+    )
+}
+
+/// A frame of the Y'CbCr video deskstage writes (I420 or Y444, BT.601 limited
+/// range), decoded as [`Y4mReader`] decodes the files.
+fn sample_to_image(sample: &gst::Sample) -> Result<RgbImage, String> {
+    let caps = sample.caps().ok_or("a sample without caps")?;
+    let info = gst_video::VideoInfo::from_caps(caps).map_err(|e| e.to_string())?;
+    let chroma = match info.format() {
+        gst_video::VideoFormat::I420 => Chroma::C420,
+        gst_video::VideoFormat::Y444 => Chroma::C444,
+        _ => {
+            return Err(format!(
+                "scoring reads I420 or Y444 as deskstage writes, not {caps}"
+            ));
+        }
+    };
+    let colorimetry = info.colorimetry();
+    if colorimetry.matrix() != gst_video::VideoColorMatrix::Bt601
+        || colorimetry.range() != gst_video::VideoColorRange::Range16_235
+    {
+        return Err(format!(
+            "scoring decodes BT.601 limited range as deskstage writes, not {colorimetry}"
+        ));
+    }
+    let buffer = sample.buffer().ok_or("a sample without a buffer")?;
+    let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer, &info)
+        .map_err(|e| e.to_string())?;
+    let (w, h) = (info.width() as usize, info.height() as usize);
+    // Each plane without its row padding, as the file stores it.
+    let plane = |p: u32| -> Result<Vec<u8>, String> {
+        let (pw, ph) = match chroma {
+            Chroma::C420 if p > 0 => (w / 2, h / 2),
+            _ => (w, h),
+        };
+        let stride = frame.plane_stride()[p as usize] as usize;
+        let data = frame.plane_data(p).map_err(|e| e.to_string())?;
+        Ok((0..ph)
+            .flat_map(|row| &data[row * stride..row * stride + pw])
+            .copied()
+            .collect())
+    };
+    Ok(ycbcr_planes_to_rgb(
+        &plane(0)?,
+        &plane(1)?,
+        &plane(2)?,
+        w,
+        h,
+        chroma,
+    ))
+}
+
+fn launch(description: &str) -> Result<gst::Pipeline, String> {
+    gst::parse::launch(description)
+        .map_err(|e| e.to_string())?
+        .downcast::<gst::Pipeline>()
+        .map_err(|_| "not a pipeline".to_string())
+}
+
+/// Relights `<dir>/face.y4m` (with `<dir>/monitor.y4m` unless `with_monitor` is false)
+/// to the target `<dir>/target-<target>.png` and scores it against `<dir>/truth-<target>.y4m`.
+/// `properties` are set on the element from strings, as gst-launch does.
+pub fn score_recording(
+    dir: &Path,
+    target: &str,
+    with_monitor: bool,
+    properties: &[(&str, &str)],
+) -> Result<Score, String> {
+    init();
+    let monitor = if with_monitor {
+        format!(
+            "{} ! queue max-size-buffers=4 ! r.monitor_sink",
+            play_y4m(&dir.join("monitor.y4m"))
+        )
+    } else {
+        String::new()
+    };
+    let face = dir.join("face.y4m");
+    let pipeline = launch(&format!(
+        "lsydrelight name=r {} ! queue max-size-buffers=4 ! r.sink {monitor} \
+         r.src ! appsink name=out sync=false",
+        play_y4m(&face)
+    ))?;
+    let r = pipeline.by_name("r").ok_or("no element r")?;
+    r.set_property(
+        "target-location",
+        dir.join(format!("target-{target}.png")).to_str().unwrap(),
+    );
+    for (k, v) in properties {
+        r.set_property_from_str(k, v);
+    }
+    score_pipeline(
+        &pipeline,
+        &face,
+        &dir.join(format!("truth-{target}.y4m")),
+        Some(&r),
+    )
+}
+
+/// Scores the face video `face` as it is, through the same pipeline and decoding
+/// as the element's output but without the element, against `truth`: how the
+/// harness checks itself (a video scored against itself is 0 everywhere).
+pub fn score_unrelit(face: &Path, truth: &Path) -> Result<Score, String> {
+    init();
+    let pipeline = launch(&format!(
+        "{} ! queue max-size-buffers=4 ! appsink name=out sync=false",
+        play_y4m(face)
+    ))?;
+    score_pipeline(&pipeline, face, truth, None)
+}
+
+/// Plays `pipeline`, whose appsink `out` gives the frames to score, and scores
+/// them against `truth`, and `input` (what went in) against it too. `element`'s
+/// `stats` go into the score.
+fn score_pipeline(
+    pipeline: &gst::Pipeline,
+    input: &Path,
+    truth: &Path,
+    element: Option<&gst::Element>,
+) -> Result<Score, String> {
+    let sink = pipeline
+        .by_name("out")
+        .ok_or("no appsink")?
+        .downcast::<gst_app::AppSink>()
+        .map_err(|_| "not an appsink")?;
+    let mut truth = Y4mReader::open(truth).map_err(|e| e.to_string())?;
+    let mut input = Y4mReader::open(input).map_err(|e| e.to_string())?;
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| format!("cannot play: {e}"))?;
+
+    let mut score = Score::default();
+    let (mut region_err, mut region_n, mut frame_err, mut frame_n, mut in_err) =
+        (0.0, 0, 0.0, 0, 0.0);
+    let mut previous: Option<(RgbImage, RgbImage)> = None;
+    let mut adjacent = Vec::new();
+    let mut change = 0.0;
+    let started = Instant::now();
+    let result = loop {
+        let Some(sample) = sink.try_pull_sample(gst::ClockTime::from_seconds(120)) else {
+            break if sink.is_eos() {
+                Ok(())
+            } else {
+                Err("no frame within 120 s".to_string())
+            };
+        };
+        // Errors break out of the loop, so that the pipeline is stopped below.
+        let (out, gt, inp) = match (
+            sample_to_image(&sample),
+            truth.next_frame(),
+            input.next_frame(),
+        ) {
+            (Ok(out), Ok(Some(gt)), Ok(Some(inp))) => (out, gt, inp),
+            (Err(e), _, _) => break Err(e),
+            (_, Ok(None), _) => break Err("more relit frames than ground-truth frames".into()),
+            (_, _, Ok(None)) => break Err("more relit frames than input frames".into()),
+            (_, Err(e), _) | (_, _, Err(e)) => break Err(e.to_string()),
+        };
+        let size = out.width.min(out.height);
+        let region = Some(((out.width - size) / 2, (out.height - size) / 2, size));
+        let (e, n) = sq_err(&out, &gt, region);
+        region_err += e;
+        region_n += n;
+        in_err += sq_err(&inp, &gt, region).0;
+        let (e, n) = sq_err(&out, &gt, None);
+        frame_err += e;
+        frame_n += n;
+        if let Some((po, pg)) = &previous {
+            let mut a = 0.0;
+            let mut c = 0.0;
+            for i in 0..out.data.len() {
+                let d_out = out.data[i] as f64 - po.data[i] as f64;
+                let d_gt = gt.data[i] as f64 - pg.data[i] as f64;
+                a += d_out * d_out;
+                c += (d_out - d_gt) * (d_out - d_gt);
+            }
+            adjacent.push((a / out.data.len() as f64).sqrt());
+            change += (c / out.data.len() as f64).sqrt();
+        }
+        previous = Some((out, gt));
+        score.frames += 1;
+    };
+    let elapsed = started.elapsed();
+    if let Some(element) = element {
+        score.stats = structure_json(&element.property::<gst::Structure>("stats"));
+    }
+    let bus_error = pipeline
+        .bus()
+        .and_then(|b| b.pop_filtered(&[gst::MessageType::Error]));
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
+    if let Some(m) = bus_error
+        && let gst::MessageView::Error(e) = m.view()
+    {
+        return Err(format!("pipeline error: {} ({:?})", e.error(), e.debug()));
+    }
+    result?;
+    if score.frames == 0 {
+        return Err("the pipeline produced no frames".into());
+    }
+    score.rmse_region = (region_err / region_n as f64).sqrt();
+    score.input_rmse_region = (in_err / region_n as f64).sqrt();
+    score.rmse_frame = (frame_err / frame_n as f64).sqrt();
+    score.adjacent_rmse = adjacent.iter().sum::<f64>() / adjacent.len().max(1) as f64;
+    score.adjacent_over = ADJACENT_THRESHOLDS
+        .iter()
+        .map(|t| adjacent.iter().filter(|a| *a > t).count() as f64 / adjacent.len().max(1) as f64)
+        .collect();
+    score.change_rmse = change / (score.frames - 1).max(1) as f64;
+    score.ms_per_frame = elapsed.as_secs_f64() * 1e3 / score.frames as f64;
+    Ok(score)
+}
+
+/// Renders a standard recording's first `frames` frames into `dir` (skipped when present).
+pub fn ensure_recording(dir: &Path, name: &str, frames: usize) -> Result<(), String> {
+    let marker = dir.join("meta.json");
+    if marker.exists() {
+        let meta: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&marker).map_err(|e| e.to_string())?)
+                .map_err(|e| e.to_string())?;
+        if meta["spec"]["frames"] == frames && meta["spec"]["name"] == name {
+            return Ok(());
+        }
+    }
+    let mut spec = deskstage::dataset::RecordingSpec::standard(name).ok_or("unknown recording")?;
+    spec.frames = frames;
+    let rec = deskstage::dataset::Recording::new(spec)?;
+    rec.write(dir).map_err(|e| e.to_string())
+}
+
+#[cfg(test)]
+mod tests {
+    use deskstage::io::Y4mWriter;
+
+    use super::*;
+
+    /// Two frames of saturated colours, greys and white, as deskstage would write them.
+    fn write_pattern(path: &Path, width: usize, height: usize, chroma: Chroma) {
+        let mut w = Y4mWriter::create(path, width, height, 30, chroma).unwrap();
+        for frame in 0..2 {
+            let mut img = RgbImage::new(width, height);
+            for (i, px) in img.data.chunks_exact_mut(3).enumerate() {
+                let (x, y) = (i % width, i / width);
+                px.copy_from_slice(&[
+                    (x * 255 / width) as u8,
+                    (y * 255 / height) as u8,
+                    if (x / 16 + y / 16 + frame) % 2 == 0 {
+                        255
+                    } else {
+                        0
+                    },
+                ]);
+            }
+            w.write(&img).unwrap();
+        }
+        w.finish().unwrap();
+    }
+
+    #[test]
+    fn a_video_scored_against_itself_is_zero_at_any_size() {
+        let dir = std::env::temp_dir().join(format!("testkit-y4m-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // 720 lines is where y4mdec would take the files as BT.709 unless told.
+        for (width, height, chroma) in [
+            (480, 360, Chroma::C420),
+            (1280, 720, Chroma::C420),
+            (1280, 720, Chroma::C444),
+        ] {
+            let path = dir.join(format!("{width}x{height}-{chroma:?}.y4m"));
+            write_pattern(&path, width, height, chroma);
+            let s = score_unrelit(&path, &path)
+                .unwrap_or_else(|e| panic!("{width}x{height} {chroma:?}: {e}"));
+            assert_eq!(s.frames, 2);
+            assert_eq!(
+                (s.rmse_frame, s.rmse_region, s.input_rmse_region),
+                (0.0, 0.0, 0.0),
+                "{width}x{height} {chroma:?}: the played frames and the read ones differ"
+            );
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}
