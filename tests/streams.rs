@@ -214,11 +214,13 @@ fn black_frames_stay_black() {
             let expected = input.map_readable().unwrap().to_vec();
             h.push(input).unwrap();
             let out = h.pull().unwrap();
-            assert_eq!(
-                out.map_readable().unwrap().as_slice(),
-                &expected[..info.size()],
-                "{format:?}: black frame {i} changed"
-            );
+            let out = out.map_readable().unwrap();
+            let changed = out
+                .iter()
+                .zip(&expected[..info.size()])
+                .filter(|(a, b)| a != b)
+                .count();
+            assert_eq!(changed, 0, "{format:?}: black frame {i} changed");
         }
         assert_eq!(stat(&e, "skipped-dark"), 3, "{format:?}");
     }
