@@ -374,12 +374,16 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             .collect();
         v
     };
-    let mut v = vec![base("default", "model", &default)];
+    // Models are compared with every frame through the network.
+    let mut v = vec![with(
+        base("default", "model", &default),
+        &[("reuse-interval", "1")],
+    )];
     // Model size and resolution: every exported variant with the default element settings.
     for run in ["t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96"] {
         let m = bench.join(run);
         if m.join("model.json").exists() {
-            v.push(with(base(run, "model", &m), &[("skip-static", "false")]));
+            v.push(with(base(run, "model", &m), &[("reuse-interval", "1")]));
         }
     }
     // Latency is timed with every frame running the network: the worst case.
@@ -387,7 +391,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
         latency_sizes: vec![(1280, 720), (1920, 1080)],
         ..with(
             base("default, no skips", "model", &default),
-            &[("skip-static", "false")],
+            &[("reuse-interval", "1")],
         )
     });
     // The CUDA execution provider, where there is a GPU.
@@ -396,7 +400,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             latency_sizes: vec![(1280, 720), (1920, 1080)],
             ..with(
                 base("default, cuda", "provider", &default),
-                &[("skip-static", "false"), ("execution-provider", "cuda")],
+                &[("reuse-interval", "1"), ("execution-provider", "cuda")],
             )
         });
     }
@@ -408,7 +412,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
                 latency_sizes: vec![(1280, 720)],
                 ..with(
                     base(&format!("default {p}"), "precision", &m),
-                    &[("skip-static", "false")],
+                    &[("reuse-interval", "1")],
                 )
             });
         }
@@ -419,7 +423,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
         latency_sizes: vec![(1280, 720)],
         ..with(
             base("default, 1 thread", "threads", &default),
-            &[("skip-static", "false")],
+            &[("reuse-interval", "1")],
         )
     });
     // The paper's temporal filters.
@@ -433,14 +437,16 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             &[
                 ("alpha", alpha),
                 ("average-frames", frames),
-                ("skip-static", "false"),
+                ("reuse-interval", "1"),
             ],
         ));
     }
     // Each skip switched from its default, on every recording.
     let rec = all(&["steady", "walkaway"]);
     for (name, prop, value) in [
-        ("static skip on", "skip-static", "true"),
+        ("no reuse", "reuse-interval", "1"),
+        ("reuse every 2nd", "reuse-interval", "2"),
+        ("reuse up to 6", "reuse-interval", "6"),
         ("no same-light skip", "skip-same-light", "false"),
         ("no absent skip", "skip-absent", "false"),
     ] {

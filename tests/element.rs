@@ -152,7 +152,7 @@ fn unsupported_caps_name_the_problem_and_the_fix() {
 fn relights_without_a_monitor_stream() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
     // The same frame three times would be a static scene; run the network every time.
-    e.set_property("skip-static", false);
+    e.set_property("reuse-interval", 1u32);
     let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
     for i in 0..3 {
         h.push(buffer(face_rgb(), &c, frame_time(i), FRAME))

@@ -1,6 +1,7 @@
 //! The per-frame policy without GStreamer: which frames are relit, reused or
 //! passed through, and what each leaves of the stream's state.
 
+use deskstage::math::Vec3;
 use deskstage::monitor::RgbImage;
 use gstlsydrelight::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Reuse, Skips,
@@ -9,7 +10,10 @@ use gstlsydrelight::engine::{
 use gstlsydrelight::frame::{Crop, Frame};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-use lsydrelight_testkit::{default_model, person::face_rgb};
+use lsydrelight_testkit::{
+    default_model,
+    person::{face_rgb, render_face},
+};
 
 fn target() -> Light {
     Light::uniform([0.8, 0.6, 0.4])
@@ -98,7 +102,10 @@ fn black_and_nearly_black_frames_pass_through_and_forget_the_past() {
     let fresh = run(&mut policy(Skips::default()), face, white_monitor(), false)
         .1
         .unwrap();
-    assert_eq!(after, fresh);
+    assert!(
+        after == fresh,
+        "the frame after the dark ones is not a fresh start"
+    );
 }
 
 #[test]
@@ -110,7 +117,7 @@ fn late_frames_reuse_the_last_relighting_once_there_is_one() {
     assert_eq!(first, Action::Relit);
     let (late, reused) = run(&mut p, face, white_monitor(), true);
     assert_eq!(late, Action::Reused(Reuse::Late));
-    assert_eq!(reused, relit, "the reused change is the last one");
+    assert!(reused == relit, "the reused change is the last one");
     assert_eq!(p.counts().reused_late, 1);
     assert_eq!(p.counts().relit, 1);
 }
@@ -143,18 +150,36 @@ fn only_a_reset_that_forgets_something_counts() {
 }
 
 #[test]
-fn the_static_skip_reuses_only_what_barely_changed() {
+fn the_network_runs_every_reuse_interval_frames_and_at_once_on_a_change() {
     let mut p = policy(Skips {
-        skip_static: true,
+        reuse_interval: 3,
         ..Skips::default()
     });
     let face = face_rgb();
-    assert_eq!(run(&mut p, face, white_monitor(), false).0, Action::Relit);
+    let runs: Vec<(Action, Option<Vec<u8>>)> = (0..7)
+        .map(|_| run(&mut p, face, white_monitor(), false))
+        .collect();
+    let actions: Vec<Action> = runs.iter().map(|(a, _)| *a).collect();
+    let (relit, carried) = (Action::Relit, Action::Reused(Reuse::Interval));
     assert_eq!(
-        run(&mut p, face, white_monitor(), false).0,
-        Action::Reused(Reuse::Static)
+        actions,
+        [relit, carried, carried, relit, carried, carried, relit]
     );
-    // Another light is not a static scene.
+    // The same picture: the carried change is the relit one.
+    assert!(runs[1].1 == runs[0].1, "carried change differs");
+    // Another picture (a cut) runs the network at once, and the interval starts again.
+    let cut = render_face(Vec3::new(0.3, 0.3, 1.0));
+    assert_eq!(run(&mut p, &cut, white_monitor(), false).0, relit);
+    assert_eq!(run(&mut p, &cut, white_monitor(), false).0, carried);
+    // So does another light.
     let blue = Source::Known(Light::uniform([0.1, 0.1, 0.9]));
-    assert_eq!(run(&mut p, face, blue, false).0, Action::Relit);
+    assert_eq!(run(&mut p, &cut, blue, false).0, relit);
+    // An interval of 1 runs the network on every frame.
+    let mut every = policy(Skips {
+        reuse_interval: 1,
+        ..Skips::default()
+    });
+    for _ in 0..3 {
+        assert_eq!(run(&mut every, face, white_monitor(), false).0, relit);
+    }
 }

@@ -28,7 +28,7 @@ fn push(h: &mut Harness, c: &gst::Caps, img: &RgbImage, i: u64) -> RgbImage {
 }
 
 #[test]
-fn a_static_scene_reuses_the_relighting_and_keeps_the_state_right() {
+fn a_still_scene_carries_the_relighting_between_network_runs() {
     let still = face_rgb();
     let moved = render_person(
         &State {
@@ -42,34 +42,32 @@ fn a_static_scene_reuses_the_relighting_and_keeps_the_state_right() {
         FACE_W,
         FACE_H,
     );
-    let run = |skip: bool| {
-        let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", skip));
+    let run = |interval: u32| {
+        let (e, mut h, c) = harness_with(|e| e.set_property("reuse-interval", interval));
         let outs: Vec<RgbImage> = (0..6).map(|i| push(&mut h, &c, still, i)).collect();
         let after = push(&mut h, &c, &moved, 6);
         (e, outs, after)
     };
-    let (skipping, outs_skip, after_skip) = run(true);
-    let (computing, outs_full, after_full) = run(false);
+    let (reusing, outs_reused, after_reused) = run(3);
+    let (computing, outs_full, after_full) = run(1);
+    // Frames 1, 2, 4 and 5 carry the relighting of frames 0 and 3; the moved frame
+    // runs the network.
+    assert_eq!(stat(&reusing, "reused-interval"), 4);
+    assert_eq!(stat(&reusing, "relit"), 3);
     assert_eq!(
-        stat(&skipping, "skipped-static"),
-        5,
-        "five repeats of the first frame are reused"
-    );
-    assert_eq!(stat(&skipping, "relit"), 2);
-    assert_eq!(
-        stat(&computing, "skipped-static"),
+        stat(&computing, "reused-interval"),
         0,
-        "skip-static=false always runs the network"
+        "reuse-interval=1 always runs the network"
     );
-    // The same frame, reused or recomputed: the same picture within a level.
-    for (a, b) in outs_skip.iter().zip(&outs_full) {
+    // The same frame, carried or recomputed: the same picture within a level.
+    for (a, b) in outs_reused.iter().zip(&outs_full) {
         assert!(mean_abs_diff(a, b) < 0.5);
     }
-    // The smoothing state advanced across the skipped frames as if they had run.
+    // The smoothing state advanced across the carried frames as if they had run.
     assert!(
-        mean_abs_diff(&after_skip, &after_full) < 0.1,
-        "the first changed frame after a static stretch: {}",
-        mean_abs_diff(&after_skip, &after_full)
+        mean_abs_diff(&after_reused, &after_full) < 0.1,
+        "the first changed frame after a still stretch: {}",
+        mean_abs_diff(&after_reused, &after_full)
     );
 }
 
@@ -106,7 +104,7 @@ fn source_equal_to_target_passes_the_frame_through() {
         e.set_property("target-location", &white);
         e.set_property("same-light-tolerance", 1.0f64);
         // The same frame three times is a static scene; that skip is not under test.
-        e.set_property("skip-static", false);
+        e.set_property("reuse-interval", 1u32);
     });
     for i in 0..3 {
         h3.push(buffer(face_rgb(), &c3, frame_time(i), FRAME))
@@ -145,7 +143,7 @@ fn nobody_there_means_no_inference_and_a_fresh_start() {
         FACE_W,
         FACE_H,
     );
-    let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
+    let (e, mut h, c) = harness_with(|e| e.set_property("reuse-interval", 1u32));
     let mut side = Harness::with_element(&e, None, Some("monitor_src"));
     push(&mut h, &c, face_rgb(), 0);
     push(&mut h, &c, face_rgb(), 1);
@@ -186,7 +184,7 @@ fn nobody_there_means_no_inference_and_a_fresh_start() {
 
 #[test]
 fn late_frames_reuse_the_relighting_and_say_so() {
-    let (e, mut h, c) = harness_with(|e| e.set_property("skip-static", false));
+    let (e, mut h, c) = harness_with(|e| e.set_property("reuse-interval", 1u32));
     let bus = gst::Bus::new();
     e.set_bus(Some(&bus));
     push(&mut h, &c, face_rgb(), 0);
@@ -215,7 +213,7 @@ fn late_frames_reuse_the_relighting_and_say_so() {
     );
 
     let (e2, mut h2, c2) = harness_with(|e| {
-        e.set_property("skip-static", false);
+        e.set_property("reuse-interval", 1u32);
         e.set_property("qos", false);
     });
     push(&mut h2, &c2, face_rgb(), 0);

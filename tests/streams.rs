@@ -19,7 +19,7 @@ use lsydrelight_testkit::{
 /// The element, configured, then started by the harness.
 fn harness_with(configure: impl FnOnce(&gst::Element)) -> (gst::Element, Harness) {
     let e = element();
-    e.set_property("skip-static", false);
+    e.set_property("reuse-interval", 1u32);
     configure(&e);
     let h = Harness::with_element(&e, Some("sink"), Some("src"));
     (e, h)

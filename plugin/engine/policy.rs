@@ -7,7 +7,10 @@
 //! - **pass through**, untouched: the region is too dark to carry light to change
 //!   (black frames stay black), nobody is in view, the source light already is the
 //!   target, or the network broke (NaN/Inf);
-//! - **reuse** the last relighting: the frame is late (QoS), or the scene is static;
+//! - **reuse** the last relighting, carried onto this frame: the frame is late
+//!   (QoS), or the network ran less than `reuse-interval` frames ago and neither
+//!   the picture nor the light changed much since (sensor noise does not count,
+//!   a cut or a big motion does);
 //! - **relight**: run the network, with the paper's temporal filters (source-light
 //!   averaging and de-lit feature smoothing, [`super::temporal`]).
 //!
@@ -41,12 +44,16 @@ pub const DARK_LEVEL: f32 = 0.03;
 /// The scene-adaptive skips and their thresholds (the element's properties).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Skips {
-    /// Reuse the last relighting while the face region and light barely change.
-    pub skip_static: bool,
-    /// Mean absolute change of the network's input (sRGB, [0, 1]) that counts as static.
-    pub static_threshold: f32,
-    /// Mean absolute change of the averaged source light (linear) that counts as unchanged.
-    pub static_light_threshold: f32,
+    /// The network runs at least every this many frames; the frames in between
+    /// carry the last relighting (1: every frame runs the network).
+    pub reuse_interval: u32,
+    /// Mean absolute change of the network's input (sRGB, [0, 1]) since the network
+    /// last ran beyond which it runs at once: a cut or a big motion. Sensor noise of
+    /// a still face is about 0.0044.
+    pub reuse_threshold: f32,
+    /// Mean absolute change of the averaged source light (linear) beyond which the
+    /// network runs at once.
+    pub reuse_light_threshold: f32,
     /// Pass through when the source light is the target light.
     pub skip_same_light: bool,
     /// Mean absolute difference (linear) under which source and target are the same.
@@ -58,13 +65,12 @@ pub struct Skips {
 
 impl Default for Skips {
     // From the benchmark's skip table (README, "Skipping what a scene does not need"):
-    // each skip is on where it pays. The static skip never fired on a webcam
-    // recording (sensor noise exceeds its threshold), so it is off.
+    // each skip is on where it pays.
     fn default() -> Self {
         Skips {
-            skip_static: false,
-            static_threshold: 0.004,
-            static_light_threshold: 0.002,
+            reuse_interval: DEFAULT_REUSE_INTERVAL,
+            reuse_threshold: 0.02,
+            reuse_light_threshold: 0.002,
             skip_same_light: true,
             same_light_tolerance: 0.004,
             skip_absent: true,
@@ -72,6 +78,9 @@ impl Default for Skips {
         }
     }
 }
+
+/// How often the network runs at least, by default (`reuse-interval`).
+pub const DEFAULT_REUSE_INTERVAL: u32 = 3;
 
 /// One face frame, as the policy needs it.
 pub struct FrameRequest<'a> {
@@ -87,8 +96,9 @@ pub struct FrameRequest<'a> {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Reuse {
-    /// The face region and the source light barely changed.
-    Static,
+    /// The network ran less than `reuse-interval` frames ago, and the face region
+    /// and the source light changed little since.
+    Interval,
     /// The frame is already late (QoS).
     Late,
 }
@@ -123,6 +133,8 @@ pub struct Outcome<'a> {
     /// What the decision was based on, for the debug log.
     pub luma: f32,
     pub presence: Option<f32>,
+    /// Mean absolute change of the network's input since the network last ran.
+    pub change_since_network: f32,
 }
 
 impl fmt::Display for Outcome<'_> {
@@ -130,11 +142,12 @@ impl fmt::Display for Outcome<'_> {
         match self.action {
             Action::Relit => write!(f, "relit by the network"),
             Action::Reused(Reuse::Late) => {
-                write!(f, "reused the last relighting: the frame is late (QoS)")
+                write!(f, "carried the last relighting: the frame is late (QoS)")
             }
-            Action::Reused(Reuse::Static) => write!(
+            Action::Reused(Reuse::Interval) => write!(
                 f,
-                "reused the last relighting: the face region and light barely changed"
+                "carried the last relighting: the network ran recently and little changed since (change {:.4})",
+                self.change_since_network
             ),
             Action::PassedThrough(PassThrough::Dark) => write!(
                 f,
@@ -172,7 +185,7 @@ pub struct FrameOutput {
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PolicyCounts {
     pub relit: u64,
-    pub reused_static: u64,
+    pub reused_interval: u64,
     pub reused_late: u64,
     pub passed_dark: u64,
     pub passed_absent: u64,
@@ -192,12 +205,15 @@ pub struct PolicyCounts {
 
 /// What a relit frame leaves for the frames that reuse it.
 struct Processed {
-    /// The network's input and the averaged source light.
+    /// The network's input and output, and the averaged source light.
     image: Vec<f32>,
+    relit: Vec<f32>,
     average: Light,
     change: LightingChange,
     crop: Crop,
     predicted: Option<Light>,
+    /// Frames that carried this relighting since the network ran.
+    carried: u32,
 }
 
 pub struct FramePolicy {
@@ -211,6 +227,8 @@ pub struct FramePolicy {
     /// The source light of the last frame that ran the network, before averaging.
     last_source: Option<Light>,
     last: Option<Processed>,
+    /// The last relighting as carried onto the current frame.
+    carried: Option<LightingChange>,
     counts: PolicyCounts,
 }
 
@@ -230,6 +248,7 @@ impl FramePolicy {
             target: None,
             last_source: None,
             last: None,
+            carried: None,
             counts: PolicyCounts::default(),
         }
     }
@@ -317,6 +336,7 @@ impl FramePolicy {
             predicted: None,
             luma,
             presence,
+            change_since_network: 0.0,
         };
         if luma < DARK_LEVEL {
             // The person (or the picture) will have changed by the time there is
@@ -352,35 +372,45 @@ impl FramePolicy {
                 ..passed(PassThrough::SameLight, presence)
             });
         }
-        let reuse = self
-            .last
-            .as_ref()
-            .filter(|last| last.crop == crop)
-            .and_then(|last| {
-                if late {
-                    return Some(Reuse::Late);
-                }
-                let light_change = average
-                    .as_ref()
-                    .map_or(f32::INFINITY, |a| a.distance(&last.average));
-                (self.skips.skip_static
-                    && mean_abs_diff(&image, &last.image) <= self.skips.static_threshold
-                    && light_change <= self.skips.static_light_threshold)
-                    .then_some(Reuse::Static)
-            });
+        let last = self.last.as_ref().filter(|last| last.crop == crop);
+        let change_since_network = last.map_or(f32::INFINITY, |l| mean_abs_diff(&image, &l.image));
+        let reuse = last.and_then(|last| {
+            if late {
+                return Some(Reuse::Late);
+            }
+            let light_change = average
+                .as_ref()
+                .map_or(f32::INFINITY, |a| a.distance(&last.average));
+            (last.carried + 1 < self.skips.reuse_interval
+                && change_since_network <= self.skips.reuse_threshold
+                && light_change <= self.skips.reuse_light_threshold)
+                .then_some(Reuse::Interval)
+        });
         if let Some(why) = reuse {
             match why {
                 Reuse::Late => self.counts.reused_late += 1,
-                Reuse::Static => self.counts.reused_static += 1,
+                Reuse::Interval => self.counts.reused_interval += 1,
             }
             self.skip_frame(&source);
-            let last = self.last.as_ref().expect("reuse needs a relit frame");
+            let last = self.last.as_mut().expect("reuse needs a relit frame");
+            last.carried += 1;
+            // The last lighting change, carried onto this frame: what the network
+            // added to the last input, added to this one (for an unchanged input,
+            // exactly the last output).
+            let estimate: Vec<f32> = image
+                .iter()
+                .zip(&last.image)
+                .zip(&last.relit)
+                .map(|((now, then), relit)| relit + (now - then))
+                .collect();
+            let carried = LightingChange::new(&image, &estimate, res, frame.format, frame.matrix);
             return Ok(Outcome {
                 action: Action::Reused(why),
-                change: Some(&last.change),
+                change: Some(self.carried.insert(carried)),
                 predicted: last.predicted.clone(),
                 luma,
                 presence,
+                change_since_network,
             });
         }
         let out = self.relight(&image, source, want_prediction)?;
@@ -394,10 +424,12 @@ impl FramePolicy {
         let change = LightingChange::new(&image, &relit, res, frame.format, frame.matrix);
         let last = self.last.insert(Processed {
             image,
+            relit,
             average: average.unwrap_or(out.source),
             change,
             crop,
             predicted: out.predicted.clone(),
+            carried: 0,
         });
         Ok(Outcome {
             action: Action::Relit,
@@ -405,6 +437,7 @@ impl FramePolicy {
             predicted: out.predicted,
             luma,
             presence,
+            change_since_network,
         })
     }
 

@@ -106,12 +106,10 @@ impl Settings {
             "crop-size" => self.crop.size = v.get().expect(checked),
             "feather" => self.feather = v.get().expect(checked),
             "reset-gap" => self.reset_gap = gst::ClockTime::from_nseconds(v.get().expect(checked)),
-            "skip-static" => self.skips.skip_static = v.get().expect(checked),
-            "static-threshold" => {
-                self.skips.static_threshold = v.get::<f64>().expect(checked) as f32
-            }
-            "static-light-threshold" => {
-                self.skips.static_light_threshold = v.get::<f64>().expect(checked) as f32
+            "reuse-interval" => self.skips.reuse_interval = v.get().expect(checked),
+            "reuse-threshold" => self.skips.reuse_threshold = v.get::<f64>().expect(checked) as f32,
+            "reuse-light-threshold" => {
+                self.skips.reuse_light_threshold = v.get::<f64>().expect(checked) as f32
             }
             "skip-same-light" => self.skips.skip_same_light = v.get().expect(checked),
             "same-light-tolerance" => {
@@ -145,9 +143,9 @@ impl Settings {
             "crop-size" => self.crop.size.to_value(),
             "feather" => self.feather.to_value(),
             "reset-gap" => self.reset_gap.nseconds().to_value(),
-            "skip-static" => self.skips.skip_static.to_value(),
-            "static-threshold" => (self.skips.static_threshold as f64).to_value(),
-            "static-light-threshold" => (self.skips.static_light_threshold as f64).to_value(),
+            "reuse-interval" => self.skips.reuse_interval.to_value(),
+            "reuse-threshold" => (self.skips.reuse_threshold as f64).to_value(),
+            "reuse-light-threshold" => (self.skips.reuse_light_threshold as f64).to_value(),
             "skip-same-light" => self.skips.skip_same_light.to_value(),
             "same-light-tolerance" => (self.skips.same_light_tolerance as f64).to_value(),
             "skip-absent" => self.skips.skip_absent.to_value(),
@@ -271,26 +269,28 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .default_value(DEFAULT_RESET_GAP.nseconds())
                 .mutable_playing()
                 .build(),
-            glib::ParamSpecBoolean::builder("skip-static")
-                .nick("Skip static scenes")
-                .blurb("Reuse the last relighting while the face region and the source light barely change (thresholds below); for clean, still sources such as screen recordings, off by default because webcam noise never passes the thresholds")
-                .default_value(d.skips.skip_static)
+            glib::ParamSpecUInt::builder("reuse-interval")
+                .nick("Reuse interval")
+                .blurb("The network runs at least every this many frames; in between, the last relighting is carried onto each frame, unless the picture or the light changed beyond the thresholds below (1: every frame runs the network)")
+                .minimum(1)
+                .maximum(30)
+                .default_value(d.skips.reuse_interval)
                 .mutable_playing()
                 .build(),
-            glib::ParamSpecDouble::builder("static-threshold")
-                .nick("Static image threshold")
-                .blurb("Mean absolute change of the network's input (sRGB in [0, 1]) since the last relit frame below which the scene counts as static")
+            glib::ParamSpecDouble::builder("reuse-threshold")
+                .nick("Reuse image threshold")
+                .blurb("Mean absolute change of the network's input (sRGB in [0, 1]) since the network last ran beyond which it runs at once (a cut, a big motion); a still face's sensor noise is about 0.0044")
                 .minimum(0.0)
                 .maximum(1.0)
-                .default_value(d.skips.static_threshold as f64)
+                .default_value(d.skips.reuse_threshold as f64)
                 .mutable_playing()
                 .build(),
-            glib::ParamSpecDouble::builder("static-light-threshold")
-                .nick("Static light threshold")
-                .blurb("Mean absolute change of the averaged source light (linear) below which the light counts as unchanged")
+            glib::ParamSpecDouble::builder("reuse-light-threshold")
+                .nick("Reuse light threshold")
+                .blurb("Mean absolute change of the averaged source light (linear) since the network last ran beyond which it runs at once")
                 .minimum(0.0)
                 .maximum(1.0)
-                .default_value(d.skips.static_light_threshold as f64)
+                .default_value(d.skips.reuse_light_threshold as f64)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecBoolean::builder("skip-same-light")

@@ -36,7 +36,7 @@ impl Stats {
             .field("skipped-dark", p.passed_dark)
             .field("skipped-absent", p.passed_absent)
             .field("skipped-same-light", p.passed_same_light)
-            .field("skipped-static", p.reused_static)
+            .field("reused-interval", p.reused_interval)
             .field("qos-reused", p.reused_late)
             .field("processing-seconds", self.processing_seconds)
             .field("network-seconds", p.network_seconds)

@@ -33,6 +33,9 @@ from . import ROOT, metrics
 BENCH = ROOT / "target" / "bench-models"
 VARIANT_RUNS = ("t-lcfn", "p-r96", "p-r160", "p-w0125", "e-r96")
 
+# The element's stats that count frames the network did not run on.
+SKIP_COUNTS = ("reused-interval", "skipped-same-light", "skipped-absent", "skipped-dark")
+
 
 def export_all(data_root: Path, runs: Path) -> None:
     default = ROOT / "models" / "default"
@@ -300,7 +303,7 @@ def skip_table(rows: list[dict]) -> str:
             continue
         for x in r["recordings"]:
             st = x["stats"]
-            skipped = sum(st.get(k, 0) for k in ("skipped-static", "skipped-same-light", "skipped-absent"))
+            skipped = sum(st.get(k, 0) for k in SKIP_COUNTS)
             out.append(
                 f"| {r['name']} | {x['recording']} | {x['fps']:.1f} | {x['rmse_region']:.2f} | "
                 f"{x['change_rmse']:.2f} | {skipped}/{st.get('frames', 0)} |"
