@@ -61,5 +61,21 @@ if [ "$level" = full ]; then
   fi
   say "installing the pinned Python packages (torch is about 3 GB the first time; quick after)"
   .venv/bin/python -m pip install -q --disable-pip-version-check -r train/requirements.txt
+
+  # Real faces for the no-ground-truth measures (examples/real_footage.rs), from
+  # packages and never committed: scikit-image's astronaut portrait (public
+  # domain, in the pinned wheel) and opencv-doc's Megamind clip (Debian; a film
+  # clip, used for robustness only).
+  MEDIA=target/real-media
+  mkdir -p "$MEDIA"
+  cp -u .venv/lib/python3.11/site-packages/skimage/data/astronaut.png "$MEDIA/"
+  if [ ! -f "$MEDIA/Megamind.avi" ]; then
+    say "fetching Megamind.avi from Debian's opencv-doc package"
+    deb_dir=$(mktemp -d)
+    (cd "$deb_dir" && apt-get download -q opencv-doc >/dev/null)
+    dpkg-deb --fsys-tarfile "$deb_dir"/opencv-doc_*.deb |
+      tar -x -O ./usr/share/doc/opencv-doc/examples/data/Megamind.avi >"$MEDIA/Megamind.avi"
+    rm -r "$deb_dir"
+  fi
 fi
 say "ready ($level): ONNX Runtime at $ORT_DIR/libonnxruntime.so"

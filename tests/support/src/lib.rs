@@ -8,6 +8,8 @@
 //! - [`element`]: the element, and reading what it reports;
 //! - [`recording`]: a simulator recording run through the element and scored
 //!   against its exact ground truth;
+//! - [`quality`]: measures of the output that need no ground truth (box edges,
+//!   mottling, pumping), for real footage;
 //! - [`flags`]: the examples' command-line flags.
 //!
 //! The checkout's paths and registering the plugin are here at the top.
@@ -17,6 +19,7 @@ use std::path::{Path, PathBuf};
 pub mod element;
 pub mod flags;
 pub mod person;
+pub mod quality;
 pub mod recording;
 pub mod video;
 

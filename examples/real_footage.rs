@@ -1,0 +1,221 @@
+//! Real faces the model never saw, with no monitor stream (the source light is
+//! predicted): the element's output scored with measures that need no ground
+//! truth (box edges, mottling, pumping; `lsydrelight_testkit::quality`), and a
+//! before/after image of each.
+//!
+//! ```text
+//! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
+//!     [--frames 90] [--target models/targets/sunset.png]
+//! ```
+//!
+//! The media come from packages, fetched by `scripts/setup.sh full` into
+//! `target/real-media` (never committed): scikit-image's `astronaut.png` (PyPI,
+//! public domain), shown as a still video, and Debian opencv-doc's `Megamind.avi`
+//! (a film clip, for robustness only).
+
+use std::path::{Path, PathBuf};
+
+use deskstage::monitor::RgbImage;
+use gst::prelude::*;
+use lsydrelight_testkit::{
+    checkout, default_model,
+    flags::flag,
+    init,
+    quality::{Region, box_edge_score, mean_change, mottling, pumping},
+    video::{FRAME, frame_time, rgb_caps, to_rgb},
+};
+
+/// One clip's measures.
+struct Measured {
+    name: String,
+    frames: usize,
+    box_edge_max: f64,
+    box_edge_median: f64,
+    mottling_median: f64,
+    pumping: f64,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(0.0)
+}
+
+/// Decodes up to `frames` frames of a video, or a still image repeated, as RGB.
+fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
+    let still = path.extension().is_some_and(|e| e == "png");
+    let source = if still {
+        format!("pngdec ! videoconvert ! imagefreeze num-buffers={frames}")
+    } else {
+        "decodebin ! videoconvert".to_string()
+    };
+    let pipeline = gst::parse::launch(&format!(
+        "filesrc location=\"{}\" ! {source} ! video/x-raw,format=RGB \
+         ! appsink name=sink sync=false",
+        path.display()
+    ))
+    .map_err(|e| e.to_string())?
+    .downcast::<gst::Bin>()
+    .expect("a pipeline is a bin");
+    let sink = pipeline
+        .by_name("sink")
+        .and_then(|s| s.downcast::<gst_app::AppSink>().ok())
+        .expect("the appsink");
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| format!("cannot play {}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    while out.len() < frames {
+        let Ok(sample) = sink.pull_sample() else {
+            break;
+        };
+        let (Some(buffer), Some(caps)) = (sample.buffer_owned(), sample.caps_owned()) else {
+            break;
+        };
+        out.push(to_rgb(&buffer, &caps));
+    }
+    pipeline.set_state(gst::State::Null).map_err(|e| e.to_string())?;
+    if out.is_empty() {
+        return Err(format!("no frames decoded from {}", path.display()));
+    }
+    Ok(out)
+}
+
+/// The frames relit by the element with no monitor stream.
+fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<RgbImage>, String> {
+    let (w, h) = (frames[0].width as u32, frames[0].height as u32);
+    let caps = rgb_caps(w, h, 30);
+    let pipeline = gst::parse::launch(&format!(
+        "appsrc name=src format=time ! lsydrelight name=r model-location=\"{}\" \
+         target-location=\"{}\" ! appsink name=sink sync=false",
+        default_model().display(),
+        target.display()
+    ))
+    .map_err(|e| e.to_string())?
+    .downcast::<gst::Bin>()
+    .expect("a pipeline is a bin");
+    let src = pipeline
+        .by_name("src")
+        .and_then(|s| s.downcast::<gst_app::AppSrc>().ok())
+        .expect("the appsrc");
+    let sink = pipeline
+        .by_name("sink")
+        .and_then(|s| s.downcast::<gst_app::AppSink>().ok())
+        .expect("the appsink");
+    src.set_caps(Some(&caps));
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| format!("the element does not start: {e}"))?;
+    let mut out = Vec::with_capacity(frames.len());
+    for (i, img) in frames.iter().enumerate() {
+        let mut buffer = gst::Buffer::from_mut_slice(img.data.clone());
+        {
+            let b = buffer.get_mut().expect("a new buffer is writable");
+            b.set_pts(frame_time(i as u64));
+            b.set_duration(FRAME);
+        }
+        src.push_buffer(buffer).map_err(|e| e.to_string())?;
+        let sample = sink.pull_sample().map_err(|_| "the element stopped")?;
+        out.push(to_rgb(&sample.buffer_owned().expect("a buffer"), &caps));
+    }
+    let _ = src.end_of_stream();
+    pipeline.set_state(gst::State::Null).map_err(|e| e.to_string())?;
+    Ok(out)
+}
+
+/// The element's default face region: the centred square of full height.
+fn face_region(img: &RgbImage) -> Region {
+    let size = img.width.min(img.height);
+    Region {
+        x: (img.width - size) / 2,
+        y: (img.height - size) / 2,
+        size,
+    }
+}
+
+/// Input and output side by side.
+fn before_after(before: &RgbImage, after: &RgbImage) -> RgbImage {
+    let gap = 8;
+    let (w, h) = (before.width, before.height);
+    let total = 2 * w + gap;
+    let mut data = vec![255u8; total * h * 3];
+    for (x0, img) in [(0, before), (w + gap, after)] {
+        for y in 0..h {
+            let row = &img.data[y * w * 3..(y + 1) * w * 3];
+            data[(y * total + x0) * 3..(y * total + x0 + w) * 3].copy_from_slice(row);
+        }
+    }
+    RgbImage {
+        width: total,
+        height: h,
+        data,
+    }
+}
+
+fn measure(
+    name: &str,
+    path: &Path,
+    frames: usize,
+    target: &Path,
+    out: &Path,
+) -> Result<Measured, String> {
+    let input = decode(path, frames)?;
+    let output = relight(&input, target)?;
+    let region = face_region(&input[0]);
+    let edges: Vec<f64> = input
+        .iter()
+        .zip(&output)
+        .map(|(i, o)| box_edge_score(i, o))
+        .collect();
+    let mottled: Vec<f64> = input
+        .iter()
+        .zip(&output)
+        .map(|(i, o)| mottling(i, o, region))
+        .collect();
+    let changes: Vec<f64> = input
+        .iter()
+        .zip(&output)
+        .map(|(i, o)| mean_change(i, o, region))
+        .collect();
+    let shown = input.len() / 2;
+    let image = out.join(format!("{name}-before-after.png"));
+    deskstage::io::write_png(&image, &before_after(&input[shown], &output[shown]))
+        .map_err(|e| format!("{}: {e}", image.display()))?;
+    Ok(Measured {
+        name: name.to_string(),
+        frames: input.len(),
+        box_edge_max: edges.iter().copied().fold(0.0, f64::max),
+        box_edge_median: median(edges),
+        mottling_median: median(mottled),
+        pumping: pumping(&changes),
+    })
+}
+
+fn main() -> Result<(), String> {
+    let root = checkout();
+    let media = flag("--media").map_or_else(|| root.join("target/real-media"), PathBuf::from);
+    let out = flag("--out").map_or_else(|| root.join("results/real"), PathBuf::from);
+    let target = flag("--target")
+        .map_or_else(|| root.join("models/targets/sunset.png"), PathBuf::from);
+    let frames: usize = flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
+    init();
+    std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
+    println!("| clip | frames | box edge max % | box edge median % | mottling median % | pumping (levels) |");
+    println!("|---|---|---|---|---|---|");
+    for (name, file) in clips {
+        let path = media.join(file);
+        if !path.exists() {
+            return Err(format!(
+                "{} is missing: run scripts/setup.sh full, which fetches it",
+                path.display()
+            ));
+        }
+        let m = measure(name, &path, frames, &target, &out)?;
+        println!(
+            "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
+            m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
+        );
+    }
+    println!("before/after images in {}", out.display());
+    Ok(())
+}

@@ -1,0 +1,227 @@
+//! Measures of the element's output that need no ground truth, for real footage
+//! (and, beside the exact errors, for the simulator's recordings):
+//!
+//! - [`box_edge_score`]: the largest straight, axis-aligned step in the smoothed
+//!   log ratio of output to input luminance that stays coherent over a fifth of
+//!   the frame height, in percent: the visible edge of a relit box.
+//! - [`mottling`]: the colour part of the per-channel log gain (log gain less its
+//!   mean over the channels), less its smooth part (a box blur a quarter of the
+//!   face wide), as RMS in percent over the face: blotchy skin.
+//! - [`pumping`]: the 95th percentile of the frame-to-frame change of the face
+//!   region's mean (output minus input), in levels: brightness that breathes
+//!   while the input is steady.
+//!
+//! Images are packed 8-bit sRGB ([`RgbImage`]).
+
+use deskstage::monitor::RgbImage;
+
+/// Keeps the log of black finite: a level of 8-bit sRGB near black, in linear light.
+const LOG_EPSILON: f64 = 3e-4;
+
+/// A square region of an image, in pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Region {
+    pub x: usize,
+    pub y: usize,
+    pub size: usize,
+}
+
+fn srgb_to_linear(v: u8) -> f64 {
+    let v = v as f64 / 255.0;
+    if v <= 0.04045 {
+        v / 12.92
+    } else {
+        ((v + 0.055) / 1.055).powf(2.4)
+    }
+}
+
+/// Per pixel: the natural log of output over input of `value(pixel)`.
+fn log_ratio(input: &RgbImage, output: &RgbImage, value: impl Fn(&[u8]) -> f64) -> Vec<f64> {
+    assert_eq!(
+        (input.width, input.height),
+        (output.width, output.height),
+        "input and output sizes differ"
+    );
+    input
+        .data
+        .chunks_exact(3)
+        .zip(output.data.chunks_exact(3))
+        .map(|(i, o)| ((value(o) + LOG_EPSILON) / (value(i) + LOG_EPSILON)).ln())
+        .collect()
+}
+
+fn luminance(p: &[u8]) -> f64 {
+    0.2126 * srgb_to_linear(p[0]) + 0.7152 * srgb_to_linear(p[1]) + 0.0722 * srgb_to_linear(p[2])
+}
+
+/// Box blur of radius `r` (a (2r+1)² box, clipped at the borders) of a w × h field.
+fn box_blur(field: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
+    let pass = |src: &[f64], len: usize, lines: usize, at: &dyn Fn(usize, usize) -> usize| {
+        let mut out = vec![0.0; src.len()];
+        for line in 0..lines {
+            // Running sums along the line.
+            let mut prefix = vec![0.0; len + 1];
+            for i in 0..len {
+                prefix[i + 1] = prefix[i] + src[at(line, i)];
+            }
+            for i in 0..len {
+                let (lo, hi) = (i.saturating_sub(r), (i + r + 1).min(len));
+                out[at(line, i)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+            }
+        }
+        out
+    };
+    let rows = pass(field, w, h, &|y, x| y * w + x);
+    pass(&rows, h, w, &|x, y| y * w + x)
+}
+
+/// The box-edge score of a relit frame against its input, in percent.
+pub fn box_edge_score(input: &RgbImage, output: &RgbImage) -> f64 {
+    let (w, h) = (input.width, input.height);
+    // Smoothed over about 1% of the frame height, so noise and texture do not count.
+    let r = (h / 100).max(1);
+    let ratio = box_blur(&log_ratio(input, output, luminance), w, h, r);
+    let step = 2 * r;
+    let run = (h / 5).max(1);
+    // Vertical edges: steps across x, averaged along a run of y; horizontal edges
+    // likewise with the axes swapped.
+    let vertical = coherent_step(&ratio, w, h, step, run, |x, y| y * w + x);
+    let horizontal = coherent_step(&ratio, h, w, step, run, |y, x| y * w + x);
+    100.0 * vertical.max(horizontal)
+}
+
+/// The largest mean step `f(a + step) - f(a - step)` across axis `a` (length
+/// `across`), averaged over `run` consecutive positions along the other axis.
+fn coherent_step(
+    field: &[f64],
+    across: usize,
+    along: usize,
+    step: usize,
+    run: usize,
+    at: impl Fn(usize, usize) -> usize,
+) -> f64 {
+    if across <= 2 * step || along < run {
+        return 0.0;
+    }
+    let mut best: f64 = 0.0;
+    let mut steps = vec![0.0; along];
+    for a in step..across - step {
+        for (b, s) in steps.iter_mut().enumerate() {
+            *s = field[at(a + step, b)] - field[at(a - step, b)];
+        }
+        let mut sum: f64 = steps[..run].iter().sum();
+        best = best.max(sum.abs() / run as f64);
+        for b in run..along {
+            sum += steps[b] - steps[b - run];
+            best = best.max(sum.abs() / run as f64);
+        }
+    }
+    best
+}
+
+/// Mottling of a relit frame against its input over `face`, in percent.
+pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
+    let (w, h) = (input.width, input.height);
+    let channel_gain = |c: usize| log_ratio(input, output, |p| srgb_to_linear(p[c]));
+    let gains = [channel_gain(0), channel_gain(1), channel_gain(2)];
+    let radius = (face.size / 8).max(1);
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for gain in &gains {
+        // The colour part: this channel's gain less the mean gain of the three.
+        let colour: Vec<f64> = (0..w * h)
+            .map(|i| gain[i] - (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
+            .collect();
+        let smooth = box_blur(&colour, w, h, radius);
+        for y in face.y..(face.y + face.size).min(h) {
+            for x in face.x..(face.x + face.size).min(w) {
+                let d = colour[y * w + x] - smooth[y * w + x];
+                sum += d * d;
+                count += 1;
+            }
+        }
+    }
+    100.0 * (sum / count.max(1) as f64).sqrt()
+}
+
+/// Mean of output minus input over `face`, in 8-bit levels.
+pub fn mean_change(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
+    let w = input.width;
+    let mut sum = 0.0;
+    let mut count = 0usize;
+    for y in face.y..(face.y + face.size).min(input.height) {
+        let row = 3 * (y * w + face.x)..3 * (y * w + (face.x + face.size).min(w));
+        for (o, i) in output.data[row.clone()].iter().zip(&input.data[row]) {
+            sum += *o as f64 - *i as f64;
+            count += 1;
+        }
+    }
+    sum / count.max(1) as f64
+}
+
+/// The 95th percentile of the frame-to-frame change of a series of
+/// [`mean_change`] values, in levels.
+pub fn pumping(mean_changes: &[f64]) -> f64 {
+    let mut steps: Vec<f64> = mean_changes
+        .windows(2)
+        .map(|p| (p[1] - p[0]).abs())
+        .collect();
+    if steps.is_empty() {
+        return 0.0;
+    }
+    steps.sort_by(f64::total_cmp);
+    steps[((steps.len() - 1) as f64 * 0.95).round() as usize]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image(w: usize, h: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> RgbImage {
+        RgbImage {
+            width: w,
+            height: h,
+            data: (0..w * h).flat_map(|i| f(i % w, i / w)).collect(),
+        }
+    }
+
+    #[test]
+    fn a_brightened_box_scores_high_and_a_smooth_gain_low() {
+        let (w, h) = (320, 240);
+        let input = image(w, h, |x, y| [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90]);
+        let boxed = image(w, h, |x, y| {
+            let p = [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90];
+            if (80..240).contains(&x) { p.map(|v| v.saturating_add(25)) } else { p }
+        });
+        let smooth = image(w, h, |x, y| {
+            let p = [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90];
+            p.map(|v| (v as f64 * (1.0 + 0.3 * x as f64 / w as f64)).round() as u8)
+        });
+        let boxed_score = box_edge_score(&input, &boxed);
+        let smooth_score = box_edge_score(&input, &smooth);
+        assert!(boxed_score > 30.0, "{boxed_score}");
+        assert!(smooth_score < 5.0, "{smooth_score}");
+        assert!(box_edge_score(&input, &input) < 1e-9);
+    }
+
+    #[test]
+    fn colour_blotches_mottle_and_an_even_tint_does_not() {
+        let (w, h) = (128, 128);
+        let face = Region { x: 32, y: 32, size: 64 };
+        let input = image(w, h, |_, _| [150, 120, 100]);
+        let tinted = image(w, h, |_, _| [165, 120, 95]);
+        let blotched = image(w, h, |x, y| {
+            if (x / 4 + y / 4) % 2 == 0 { [170, 112, 100] } else { [140, 128, 100] }
+        });
+        assert!(mottling(&input, &tinted, face) < 0.5);
+        assert!(mottling(&input, &blotched, face) > 5.0);
+    }
+
+    #[test]
+    fn pumping_is_the_95th_percentile_step() {
+        let steady = vec![3.0; 40];
+        assert_eq!(pumping(&steady), 0.0);
+        let breathing: Vec<f64> = (0..40).map(|i| if i % 10 < 5 { 0.0 } else { 7.0 }).collect();
+        assert!((pumping(&breathing) - 7.0).abs() < 1e-9);
+    }
+}
