@@ -27,7 +27,49 @@ pub enum PixelFormat {
     Bgr,
 }
 
+/// One plane's part in the paste, which walks each plane once.
+#[derive(Clone, Copy, Debug)]
+struct Pass {
+    plane: usize,
+    /// Frame pixels one of the plane's pixels covers in each direction.
+    subsample: usize,
+    /// Per byte of one of the plane's pixels, the channel it holds (0-2: R, G,
+    /// B or Y, Cb, Cr), `None` for padding.
+    lanes: &'static [Option<usize>],
+}
+
+impl Pass {
+    const fn new(plane: usize, subsample: usize, lanes: &'static [Option<usize>]) -> Pass {
+        Pass {
+            plane,
+            subsample,
+            lanes,
+        }
+    }
+}
+
 impl PixelFormat {
+    /// The layout of every format, in the order the planes are walked.
+    fn passes(self) -> &'static [Pass] {
+        const Y: Pass = Pass::new(0, 1, &[Some(0)]);
+        const I420: &[Pass] = &[Y, Pass::new(1, 2, &[Some(1)]), Pass::new(2, 2, &[Some(2)])];
+        const NV12: &[Pass] = &[Y, Pass::new(1, 2, &[Some(1), Some(2)])];
+        const Y444: &[Pass] = &[Y, Pass::new(1, 1, &[Some(1)]), Pass::new(2, 1, &[Some(2)])];
+        const RGBX: &[Pass] = &[Pass::new(0, 1, &[Some(0), Some(1), Some(2), None])];
+        const BGRX: &[Pass] = &[Pass::new(0, 1, &[Some(2), Some(1), Some(0), None])];
+        const RGB: &[Pass] = &[Pass::new(0, 1, &[Some(0), Some(1), Some(2)])];
+        const BGR: &[Pass] = &[Pass::new(0, 1, &[Some(2), Some(1), Some(0)])];
+        match self {
+            PixelFormat::I420 => I420,
+            PixelFormat::Nv12 => NV12,
+            PixelFormat::Y444 => Y444,
+            PixelFormat::Rgba | PixelFormat::Rgbx => RGBX,
+            PixelFormat::Bgra | PixelFormat::Bgrx => BGRX,
+            PixelFormat::Rgb => RGB,
+            PixelFormat::Bgr => BGR,
+        }
+    }
+
     /// Byte offsets of R, G and B and bytes per pixel, for packed RGB formats.
     pub(crate) fn packed(self) -> Option<([usize; 3], usize)> {
         match self {
@@ -192,6 +234,15 @@ impl Crop {
             x: place(cx, width),
             y: place(cy, height),
             size,
+        }
+    }
+
+    /// The same square in the pixels of a plane subsampled by `subsample`.
+    fn in_plane(self, subsample: usize) -> Crop {
+        Crop {
+            x: self.x / subsample,
+            y: self.y / subsample,
+            size: self.size / subsample,
         }
     }
 }
@@ -376,80 +427,207 @@ impl LightingChange {
     /// crop edge that lies inside the frame, the change fades out so the crop
     /// leaves no seam.
     pub fn apply(&self, frame: &mut FrameMut, crop: Crop, feather: usize) {
-        let (fw, fh) = (frame.width, frame.height);
-        let fade = Fade::new(crop, fw, fh, feather);
-        match frame.format.packed() {
-            Some((offsets, bpp)) => {
-                let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
-                for (c, &off) in offsets.iter().enumerate() {
-                    self.apply_channel(
-                        data, stride, off, bpp, crop.x, crop.y, crop.size, c, &fade, 1,
-                    );
-                }
-            }
-            None => {
-                let (y, ys) = (&mut *frame.planes[0].0, frame.planes[0].1);
-                self.apply_channel(y, ys, 0, 1, crop.x, crop.y, crop.size, 0, &fade, 1);
-                let (sub, places) = frame.format.chroma().expect("a YUV format");
-                let (cx, cy, cs) = (crop.x / sub, crop.y / sub, crop.size / sub);
-                for (k, (plane, offset, step)) in places.into_iter().enumerate() {
-                    let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
-                    self.apply_channel(data, stride, offset, step, cx, cy, cs, k + 1, &fade, sub);
-                }
+        let fade = Fade::new(crop, frame.width, frame.height, feather);
+        for pass in frame.format.passes() {
+            let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
+            let (area, sub) = (crop.in_plane(pass.subsample), pass.subsample);
+            match *pass.lanes {
+                [a] => self.paste([a], data, stride, area, sub, &fade),
+                [a, b] => self.paste([a, b], data, stride, area, sub, &fade),
+                [a, b, c] => self.paste([a, b, c], data, stride, area, sub, &fade),
+                [a, b, c, d] => self.paste([a, b, c, d], data, stride, area, sub, &fade),
+                _ => unreachable!("no format has {} bytes a pixel", pass.lanes.len()),
             }
         }
     }
 
-    /// One channel over a `size`×`size` region at (x0, y0) of a plane whose pixels
-    /// are `subsample` frame pixels apart.
-    #[allow(clippy::too_many_arguments)]
-    fn apply_channel(
+    /// Applies the change to the `area` (in the plane's pixels) of one plane
+    /// whose `BPP` bytes a pixel hold the channels `lanes`. Each row of the area
+    /// is one flat run of bytes ("lanes"), whatever channels they hold, so the
+    /// loop over it vectorises.
+    fn paste<const BPP: usize>(
         &self,
+        lanes: [Option<usize>; BPP],
         data: &mut [u8],
         stride: usize,
-        offset: usize,
-        step: usize,
-        x0: usize,
-        y0: usize,
-        size: usize,
-        channel: usize,
-        fade: &Fade,
+        area: Crop,
         subsample: usize,
+        fade: &Fade,
     ) {
-        let res = self.res;
-        let scale = res as f32 / size as f32;
-        // Bilinear taps along one axis: low index and weight of the high one.
-        let taps: Vec<(usize, f32)> = (0..size)
-            .map(|i| {
-                let p = ((i as f32 + 0.5) * scale - 0.5).clamp(0.0, (res - 1) as f32);
-                let lo = (p.floor() as usize).min(res.saturating_sub(2));
-                (lo, p - lo as f32)
-            })
+        let wx: Vec<f32> = (0..area.size)
+            .map(|i| fade.weight_x((area.x + i) * subsample))
             .collect();
-        let (base, input, gain) = (&self.base[channel], &self.input[channel], &self.gain);
-        let sample = |map: &[f32], (ly, ty): (usize, f32), (lx, tx): (usize, f32)| {
-            let a = map[ly * res + lx];
-            let b = map[ly * res + lx + 1];
-            let c = map[(ly + 1) * res + lx];
-            let d = map[(ly + 1) * res + lx + 1];
-            (a + (b - a) * tx) * (1.0 - ty) + (c + (d - c) * tx) * ty
+        // Columns and rows where the fade is zero keep their bytes, as they
+        // must even where the maps are not finite. The fade rises from each
+        // inner edge, so such columns are at the ends and are left out. Among
+        // the others, the product of two positive weights (each at least
+        // 0.5 / feather) is never zero, so every byte left changes as it did.
+        let positive = |w: &f32| *w > 0.0;
+        let (Some(first), Some(last)) =
+            (wx.iter().position(positive), wx.iter().rposition(positive))
+        else {
+            return;
         };
-        for (j, &ty) in taps.iter().enumerate() {
-            let row = (y0 + j) * stride + offset;
-            let wy = fade.weight_y((y0 + j) * subsample);
-            for (i, &tx) in taps.iter().enumerate() {
-                let w = wy * fade.weight_x((x0 + i) * subsample);
-                if w <= 0.0 {
-                    continue;
+        let columns = first..last + 1;
+        let taps = taps(self.res, area.size);
+        // Per lane; zero on padding, whose maps are zero too, so v + 0 · (0 − v)
+        // leaves those bytes as they are.
+        let lane_wx: Vec<f32> = wx[columns.clone()]
+            .iter()
+            .flat_map(|&w| lanes.map(|l| if l.is_some() { w } else { 0.0 }))
+            .collect();
+        let mut grid = GridRows::new(lane_wx.len());
+        for (j, &(ly, ty)) in taps.iter().enumerate() {
+            let wy = fade.weight_y((area.y + j) * subsample);
+            if wy <= 0.0 {
+                continue;
+            }
+            let (top, bottom) = grid.at(ly, |r, maps| {
+                self.interpolate_row(r, lanes, &taps[columns.clone()], maps)
+            });
+            let start = (area.y + j) * stride + (area.x + first) * BPP;
+            blend_row(
+                &mut data[start..start + lane_wx.len()],
+                &lane_wx,
+                wy,
+                ty,
+                top,
+                bottom,
+            );
+        }
+    }
+
+    /// Row `r` of the maps, interpolated across the area at every lane: the
+    /// horizontal half of the bilinear upsampling.
+    fn interpolate_row<const BPP: usize>(
+        &self,
+        r: usize,
+        lanes: [Option<usize>; BPP],
+        taps: &[(usize, f32)],
+        out: &mut Maps,
+    ) {
+        let row = r * self.res..(r + 1) * self.res;
+        // Per lane of a pixel, the rows it reads of the base, gain and input.
+        let maps = lanes.map(|lane| {
+            lane.map(|c| [&self.base[c], &self.gain, &self.input[c]].map(|map| &map[row.clone()]))
+        });
+        // a + (b − a) · t, with a and b − a (per map and lane) those of a map
+        // column that the next few pixels share. They stay zero on padding.
+        let (mut column, mut a, mut d) = (None, [[0f32; BPP]; 3], [[0f32; BPP]; 3]);
+        let outs = (out.base.chunks_exact_mut(BPP))
+            .zip(out.gain.chunks_exact_mut(BPP))
+            .zip(out.input.chunks_exact_mut(BPP));
+        for (&(lx, tx), ((base, gain), input)) in taps.iter().zip(outs) {
+            if column != Some(lx) {
+                column = Some(lx);
+                for (lane, rows) in maps.iter().enumerate() {
+                    if let Some(rows) = rows {
+                        for (m, row) in rows.iter().enumerate() {
+                            (a[m][lane], d[m][lane]) = (row[lx], row[lx + 1] - row[lx]);
+                        }
+                    }
                 }
-                let at = row + (x0 + i) * step;
-                let v = data[at] as f32;
-                let relit =
-                    sample(base, ty, tx) + sample(gain, ty, tx) * (v - sample(input, ty, tx));
-                data[at] = (v + w * (relit - v)).round().clamp(0.0, 255.0) as u8;
+            }
+            for ((out, a), d) in [base, gain, input].into_iter().zip(&a).zip(&d) {
+                for ((o, a), d) in out.iter_mut().zip(a).zip(d) {
+                    *o = a + d * tx;
+                }
             }
         }
     }
+}
+
+/// Bilinear taps from `size` samples of a frame onto `res` samples of a map:
+/// per frame sample, the lower map index and the weight of the upper one.
+fn taps(res: usize, size: usize) -> Vec<(usize, f32)> {
+    let scale = res as f32 / size as f32;
+    (0..size)
+        .map(|i| {
+            let p = ((i as f32 + 0.5) * scale - 0.5).clamp(0.0, (res - 1) as f32);
+            let lo = (p.floor() as usize).min(res.saturating_sub(2));
+            (lo, p - lo as f32)
+        })
+        .collect()
+}
+
+/// The three maps at one map row, interpolated to every lane of an area's row.
+struct Maps {
+    base: Vec<f32>,
+    gain: Vec<f32>,
+    input: Vec<f32>,
+}
+
+/// Two consecutive rows of `Maps`, kept while the output rows they serve
+/// (about `size / res` of them) go by. Row `r` lives in slot `r % 2`.
+struct GridRows {
+    held: [Option<usize>; 2],
+    slots: [Maps; 2],
+}
+
+impl GridRows {
+    fn new(lanes: usize) -> GridRows {
+        let maps = || Maps {
+            base: vec![0.0; lanes],
+            gain: vec![0.0; lanes],
+            input: vec![0.0; lanes],
+        };
+        GridRows {
+            held: [None; 2],
+            slots: [maps(), maps()],
+        }
+    }
+
+    /// Rows `ly` and `ly + 1`, filling in with `fill` those not held.
+    fn at(&mut self, ly: usize, fill: impl Fn(usize, &mut Maps)) -> (&Maps, &Maps) {
+        for r in [ly, ly + 1] {
+            if self.held[r % 2] != Some(r) {
+                fill(r, &mut self.slots[r % 2]);
+                self.held[r % 2] = Some(r);
+            }
+        }
+        (&self.slots[ly % 2], &self.slots[(ly + 1) % 2])
+    }
+}
+
+/// Blends one row of lanes: the vertical half of the bilinear upsampling, then
+/// `v + w · (R + g · (v − I) − v)` rounded, with `w` the fade, in exactly the
+/// operations of a per-pixel bilinear sample so the bytes do not change.
+fn blend_row(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
+    let uy = 1.0 - ty;
+    // Equal lengths up front let the compiler drop the bounds checks.
+    let n = row.len();
+    let (wx, top_base, top_gain, top_input) =
+        (&wx[..n], &top.base[..n], &top.gain[..n], &top.input[..n]);
+    let (bottom_base, bottom_gain, bottom_input) =
+        (&bottom.base[..n], &bottom.gain[..n], &bottom.input[..n]);
+    for k in 0..n {
+        let v = row[k] as f32;
+        let base = top_base[k] * uy + bottom_base[k] * ty;
+        let gain = top_gain[k] * uy + bottom_gain[k] * ty;
+        let input = top_input[k] * uy + bottom_input[k] * ty;
+        let relit = base + gain * (v - input);
+        let w = wy * wx[k];
+        row[k] = round_to_u8(v + w * (relit - v));
+    }
+}
+
+/// `x.round().clamp(0.0, 255.0) as u8` (NaN to 0 as there) in operations that
+/// vectorise: `f32::round` is a call to libm's `roundf` on the default x86-64
+/// target, which lacks SSE4.1's rounding instruction, and a float to integer
+/// `as` saturates, which costs a compare and a select per lane.
+fn round_to_u8(x: f32) -> u8 {
+    // Clamping first changes nothing, as rounding is monotone and 0 and 255 are
+    // whole. Comparisons with NaN fail, so NaN becomes 0.
+    let c = if x > 0.0 { x } else { 0.0 };
+    let c = if c < 255.0 { c } else { 255.0 };
+    // Adding 2^23 leaves nothing below the units, so the sum is c rounded to
+    // the nearest whole number, ties to even, and that number is in its low
+    // bits. `round` takes ties away from zero instead: where c is exactly half
+    // above the even neighbour, add one. (`c - whole` is exact.)
+    const SHIFT: f32 = 8_388_608.0;
+    let shifted = c + SHIFT;
+    let whole = shifted - SHIFT;
+    (shifted.to_bits() + u32::from(c - whole == 0.5)) as u8
 }
 
 /// Weight of the lighting change by distance to the crop's inner edges.

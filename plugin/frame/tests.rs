@@ -365,6 +365,39 @@ fn crop_matches_the_reference_within_rounding() {
 }
 
 #[test]
+fn rounding_matches_f32_round() {
+    let check = |x: f32| {
+        let expected = x.round().clamp(0.0, 255.0) as u8;
+        assert_eq!(round_to_u8(x), expected, "{x:e} ({:#x})", x.to_bits());
+    };
+    for x in [
+        f32::NAN,
+        f32::INFINITY,
+        f32::NEG_INFINITY,
+        f32::MAX,
+        f32::MIN,
+        -0.0,
+    ] {
+        check(x);
+    }
+    // Every float within 4096 steps of each whole and half number around
+    // [0, 255], where rounding and clamping change.
+    for twice in -4..=516 {
+        let (mut up, mut down) = (twice as f32 / 2.0, twice as f32 / 2.0);
+        for _ in 0..4096 {
+            check(up);
+            check(down);
+            (up, down) = (up.next_up(), down.next_down());
+        }
+    }
+    let mut noise = Noise(0x70d);
+    for _ in 0..1_000_000 {
+        check(f32::from_bits(noise.next()));
+        check(noise.uniform(-2.0, 258.0));
+    }
+}
+
+#[test]
 fn layouts_match_the_reference() {
     let mut noise = Noise(0x1a7);
     for format in FORMATS {
