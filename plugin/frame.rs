@@ -27,7 +27,7 @@ pub enum PixelFormat {
     Bgr,
 }
 
-/// One plane's part in the paste, which walks each plane once.
+/// One plane's part in the crop and the paste, which walk each plane once.
 #[derive(Clone, Copy, Debug)]
 struct Pass {
     plane: usize,
@@ -72,43 +72,39 @@ impl PixelFormat {
 
     /// Byte offsets of R, G and B and bytes per pixel, for packed RGB formats.
     pub(crate) fn packed(self) -> Option<([usize; 3], usize)> {
-        match self {
-            PixelFormat::Rgba | PixelFormat::Rgbx => Some(([0, 1, 2], 4)),
-            PixelFormat::Bgra | PixelFormat::Bgrx => Some(([2, 1, 0], 4)),
-            PixelFormat::Rgb => Some(([0, 1, 2], 3)),
-            PixelFormat::Bgr => Some(([2, 1, 0], 3)),
-            PixelFormat::I420 | PixelFormat::Nv12 | PixelFormat::Y444 => None,
-        }
-    }
-
-    /// For YUV formats: how many frame pixels one chroma sample covers in each
-    /// direction, and where Cb and Cr are.
-    fn chroma(self) -> Option<(usize, [ChromaPlace; 2])> {
-        match self {
-            PixelFormat::I420 => Some((2, [(1, 0, 1), (2, 0, 1)])),
-            PixelFormat::Nv12 => Some((2, [(1, 0, 2), (1, 1, 2)])),
-            PixelFormat::Y444 => Some((1, [(1, 0, 1), (2, 0, 1)])),
+        match self.passes() {
+            [pass] => {
+                let offset = |c| pass.lanes.iter().position(|&l| l == Some(c));
+                Some((
+                    [0, 1, 2].map(|c| offset(c).expect("R, G and B")),
+                    pass.lanes.len(),
+                ))
+            }
             _ => None,
         }
     }
 
     /// Cb and Cr of frame pixel (x, y) of a YUV frame.
     pub(crate) fn chroma_at(self, planes: &[Plane; 3], x: usize, y: usize) -> (u8, u8) {
-        let (sub, places) = self.chroma().expect("a YUV format");
-        let at = |(plane, offset, step): ChromaPlace| {
-            let p = &planes[plane];
-            p.data[(y / sub) * p.stride + (x / sub) * step + offset]
-        };
-        (at(places[0]), at(places[1]))
+        assert!(self.is_yuv(), "{self:?} has no chroma");
+        let mut cbcr = [0; 2];
+        for pass in &self.passes()[1..] {
+            let p = &planes[pass.plane];
+            let (sub, bpp) = (pass.subsample, pass.lanes.len());
+            let pixel = (y / sub) * p.stride + (x / sub) * bpp;
+            for (b, lane) in pass.lanes.iter().enumerate() {
+                if let Some(c) = *lane {
+                    cbcr[c - 1] = p.data[pixel + b];
+                }
+            }
+        }
+        (cbcr[0], cbcr[1])
     }
 
     pub fn is_yuv(self) -> bool {
         self.packed().is_none()
     }
 }
-
-/// Where a chroma channel is: plane, byte offset, bytes between samples.
-type ChromaPlace = (usize, usize, usize);
 
 /// The Y'CbCr matrix and range of a YUV stream.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -275,42 +271,36 @@ impl AreaWeights {
     }
 }
 
-/// Area resampling of a region of one 8-bit channel (with a byte step between
-/// samples) to `res`×`res` floats in [0, 255].
-#[allow(clippy::too_many_arguments)]
-fn resample_channel(
+/// Area resampling of the `area` (in the plane's pixels) of a plane with `BPP`
+/// bytes a pixel: calls `emit` with each output pixel's index and the averages
+/// of its `BPP` bytes, in raster order.
+fn resample<const BPP: usize>(
     plane: &Plane,
-    offset: usize,
-    step: usize,
-    x0: usize,
-    y0: usize,
-    wx: &AreaWeights,
-    wy: &AreaWeights,
-    out: &mut [f32],
+    area: Crop,
+    w: &AreaWeights,
+    mut emit: impl FnMut(usize, &[f32]),
 ) {
-    let res_x = wx.start.len();
-    // Horizontal pass over the rows the vertical weights touch.
-    let row_first = wy.start[0];
-    let row_last = wy.start.last().unwrap() + wy.weights.last().unwrap().len();
-    let mut rows = vec![0f32; (row_last - row_first) * res_x];
-    for (r, row) in rows.chunks_exact_mut(res_x).enumerate() {
-        let base = (y0 + row_first + r) * plane.stride + offset;
-        for (o, (s, w)) in row.iter_mut().zip(wx.start.iter().zip(&wx.weights)) {
-            let mut acc = 0.0;
-            for (k, wk) in w.iter().enumerate() {
-                acc += wk * plane.data[base + (x0 + s + k) * step] as f32;
+    let res = w.start.len();
+    // Vertically first: that pass runs over whole rows of bytes, all lanes at
+    // once and vectorised, and leaves only `res` rows for the horizontal pass.
+    let mut sums = vec![0f32; area.size * BPP];
+    for (oy, (&first, wy)) in w.start.iter().zip(&w.weights).enumerate() {
+        sums.fill(0.0);
+        for (k, &wk) in wy.iter().enumerate() {
+            let start = (area.y + first + k) * plane.stride + area.x * BPP;
+            let src = &plane.data[start..start + sums.len()];
+            for (s, &p) in sums.iter_mut().zip(src) {
+                *s += wk * p as f32;
             }
-            *o = acc;
         }
-    }
-    for (oy, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
-        let dst = &mut out[oy * res_x..(oy + 1) * res_x];
-        dst.fill(0.0);
-        for (k, wk) in w.iter().enumerate() {
-            let src = &rows[(s + k - row_first) * res_x..(s + k - row_first + 1) * res_x];
-            for (d, v) in dst.iter_mut().zip(src) {
-                *d += wk * v;
+        for (ox, (&first, wx)) in w.start.iter().zip(&w.weights).enumerate() {
+            let mut pixel = [0f32; BPP];
+            for (&wk, src) in wx.iter().zip(sums[first * BPP..].chunks_exact(BPP)) {
+                for (p, &s) in pixel.iter_mut().zip(src) {
+                    *p += wk * s;
+                }
             }
+            emit(oy * res + ox, &pixel);
         }
     }
 }
@@ -318,52 +308,38 @@ fn resample_channel(
 /// The crop resampled to `res`×`res`, as planar sRGB in [0, 1] (3 × res × res).
 pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
     let n = res * res;
+    // R, G, B or Y, Cb, Cr in 8-bit units, planar.
     let mut out = vec![0f32; 3 * n];
-    let w = AreaWeights::new(crop.size, res);
-    match frame.format.packed() {
-        Some((offsets, bpp)) => {
-            for (c, &off) in offsets.iter().enumerate() {
-                resample_channel(
-                    &frame.planes[0],
-                    off,
-                    bpp,
-                    crop.x,
-                    crop.y,
-                    &w,
-                    &w,
-                    &mut out[c * n..(c + 1) * n],
-                );
-            }
-            out.iter_mut().for_each(|v| *v /= 255.0);
-        }
-        None => {
-            // Average Y, Cb and Cr over each output pixel, then convert: the
-            // conversion is affine, so this equals averaging RGB.
-            let (sub, places) = frame.format.chroma().expect("a YUV format");
-            let wc = AreaWeights::new(crop.size / sub, res);
-            let mut yuv = vec![0f32; 3 * n];
-            resample_channel(
-                &frame.planes[0],
-                0,
-                1,
-                crop.x,
-                crop.y,
-                &w,
-                &w,
-                &mut yuv[..n],
-            );
-            let (cx, cy) = (crop.x / sub, crop.y / sub);
-            for (k, (plane, offset, step)) in places.into_iter().enumerate() {
-                let out = &mut yuv[(k + 1) * n..(k + 2) * n];
-                resample_channel(&frame.planes[plane], offset, step, cx, cy, &wc, &wc, out);
-            }
-            for i in 0..n {
-                let rgb = frame.matrix.to_rgb(yuv[i], yuv[n + i], yuv[2 * n + i]);
-                for c in 0..3 {
-                    out[c * n + i] = rgb[c];
+    for pass in frame.format.passes() {
+        let area = crop.in_plane(pass.subsample);
+        let w = AreaWeights::new(area.size, res);
+        let plane = &frame.planes[pass.plane];
+        let emit = |i: usize, pixel: &[f32]| {
+            for (lane, &v) in pass.lanes.iter().zip(pixel) {
+                if let Some(c) = *lane {
+                    out[c * n + i] = v;
                 }
             }
+        };
+        match pass.lanes.len() {
+            1 => resample::<1>(plane, area, &w, emit),
+            2 => resample::<2>(plane, area, &w, emit),
+            3 => resample::<3>(plane, area, &w, emit),
+            4 => resample::<4>(plane, area, &w, emit),
+            bpp => unreachable!("no format has {bpp} bytes a pixel"),
         }
+    }
+    if frame.format.is_yuv() {
+        // Averaging Y, Cb and Cr and then converting equals averaging RGB: the
+        // conversion is affine.
+        for i in 0..n {
+            let rgb = frame.matrix.to_rgb(out[i], out[n + i], out[2 * n + i]);
+            for (c, v) in rgb.into_iter().enumerate() {
+                out[c * n + i] = v;
+            }
+        }
+    } else {
+        out.iter_mut().for_each(|v| *v /= 255.0);
     }
     out
 }
