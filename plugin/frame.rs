@@ -284,15 +284,14 @@ fn resample<const BPP: usize>(
     // Vertically first: that pass runs over whole rows of bytes, all lanes at
     // once and vectorised, and leaves only `res` rows for the horizontal pass.
     let mut sums = vec![0f32; area.size * BPP];
+    let mut rows = Vec::new();
     for (oy, (&first, wy)) in w.start.iter().zip(&w.weights).enumerate() {
-        sums.fill(0.0);
-        for (k, &wk) in wy.iter().enumerate() {
+        rows.clear();
+        rows.extend((0..wy.len()).map(|k| {
             let start = (area.y + first + k) * plane.stride + area.x * BPP;
-            let src = &plane.data[start..start + sums.len()];
-            for (s, &p) in sums.iter_mut().zip(src) {
-                *s += wk * p as f32;
-            }
-        }
+            &plane.data[start..start + sums.len()]
+        }));
+        weighted_sum(&mut sums, &rows, wy);
         for (ox, (&first, wx)) in w.start.iter().zip(&w.weights).enumerate() {
             let mut pixel = [0f32; BPP];
             for (&wk, src) in wx.iter().zip(sums[first * BPP..].chunks_exact(BPP)) {
@@ -302,6 +301,35 @@ fn resample<const BPP: usize>(
             }
             emit(oy * res + ox, &pixel);
         }
+    }
+}
+
+/// `sums = Σ weights[k] · rows[k]`, lane by lane, adding the rows in order:
+/// the crop's inner loop.
+fn weighted_sum(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
+    // A block of lanes at a time through all the rows, rather than one row at
+    // a time: the frame comes from memory, and this asks for a cache line of
+    // every row at once, while the block's sums stay in registers or L1.
+    const BLOCK: usize = 64;
+    let whole = sums.len() / BLOCK * BLOCK;
+    let (blocks, tail) = sums.split_at_mut(whole);
+    for (b, out) in blocks.chunks_exact_mut(BLOCK).enumerate() {
+        let mut block = [0f32; BLOCK];
+        for (row, &w) in rows.iter().zip(weights) {
+            add_weighted(&mut block, &row[b * BLOCK..(b + 1) * BLOCK], w);
+        }
+        out.copy_from_slice(&block);
+    }
+    tail.fill(0.0);
+    for (row, &w) in rows.iter().zip(weights) {
+        add_weighted(tail, &row[whole..], w);
+    }
+}
+
+/// `sums += w · src`, lane by lane.
+fn add_weighted(sums: &mut [f32], src: &[u8], w: f32) {
+    for (s, &p) in sums.iter_mut().zip(src) {
+        *s += w * p as f32;
     }
 }
 
