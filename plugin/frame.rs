@@ -307,6 +307,29 @@ fn resample<const BPP: usize>(
 /// `sums = Σ weights[k] · rows[k]`, lane by lane, adding the rows in order:
 /// the crop's inner loop.
 fn weighted_sum(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
+    // AVX2 doubles the vectors' width and widens bytes to floats in fewer
+    // steps; it cut the crop's time by a fifth (I420) to a half (BGRx) at 720p
+    // on the build machine. The default x86-64 target only assumes SSE2, so
+    // the same loop is built a second time for AVX2 and chosen at run time
+    // (a cached check).
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { weighted_sum_avx2(sums, rows, weights) };
+    }
+    weighted_sum_portable(sums, rows, weights)
+}
+
+/// `weighted_sum_portable` built for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn weighted_sum_avx2(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
+    weighted_sum_portable(sums, rows, weights)
+}
+
+// Always inlined, so that `weighted_sum_avx2` holds a copy built for AVX2.
+#[inline(always)]
+fn weighted_sum_portable(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
     // A block of lanes at a time through all the rows, rather than one row at
     // a time: the frame comes from memory, and this asks for a cache line of
     // every row at once, while the block's sums stay in registers or L1.
@@ -327,6 +350,7 @@ fn weighted_sum(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
 }
 
 /// `sums += w · src`, lane by lane.
+#[inline(always)]
 fn add_weighted(sums: &mut [f32], src: &[u8], w: f32) {
     for (s, &p) in sums.iter_mut().zip(src) {
         *s += w * p as f32;
@@ -597,6 +621,28 @@ impl GridRows {
 /// `v + w · (R + g · (v − I) − v)` rounded, with `w` the fade, in exactly the
 /// operations of a per-pixel bilinear sample so the bytes do not change.
 fn blend_row(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
+    // As in `weighted_sum`: AVX2, where the CPU has it, made the paste 1.7-1.8
+    // times as fast on the build machine. The results are the same, as both
+    // builds run the same IEEE operations in the same order (Rust never fuses a
+    // multiply and an add on its own).
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { blend_row_avx2(row, wx, wy, ty, top, bottom) };
+    }
+    blend_row_portable(row, wx, wy, ty, top, bottom)
+}
+
+/// `blend_row_portable` built for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn blend_row_avx2(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
+    blend_row_portable(row, wx, wy, ty, top, bottom)
+}
+
+// Always inlined, so that `blend_row_avx2` holds a copy built for AVX2.
+#[inline(always)]
+fn blend_row_portable(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
     let uy = 1.0 - ty;
     // Equal lengths up front let the compiler drop the bounds checks.
     let n = row.len();
@@ -619,6 +665,8 @@ fn blend_row(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &
 /// vectorise: `f32::round` is a call to libm's `roundf` on the default x86-64
 /// target, which lacks SSE4.1's rounding instruction, and a float to integer
 /// `as` saturates, which costs a compare and a select per lane.
+// Always inlined, like `blend_row_portable`, into the AVX2 build.
+#[inline(always)]
 fn round_to_u8(x: f32) -> u8 {
     // Clamping first changes nothing, as rounding is monotone and 0 and 255 are
     // whole. Comparisons with NaN fail, so NaN becomes 0.

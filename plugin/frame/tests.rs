@@ -418,3 +418,36 @@ fn layouts_match_the_reference() {
         }
     }
 }
+
+#[test]
+fn both_builds_of_the_inner_loops_agree() {
+    // The tests above run whichever build of `blend_row` and `weighted_sum` the
+    // CPU takes (AVX2 on the build machine); this holds the other to it.
+    let mut noise = Noise(0xa1b2);
+    let n = 1000 + 7;
+    let mut map = |lo, hi| -> Vec<f32> { (0..n).map(|_| noise.uniform(lo, hi)).collect() };
+    let mut maps = || Maps {
+        base: map(-60.0, 320.0),
+        gain: map(0.0, MAX_GAIN),
+        input: map(-60.0, 320.0),
+    };
+    let (top, mut bottom) = (maps(), maps());
+    bottom.base[5] = f32::NAN;
+    bottom.input[17] = f32::INFINITY;
+    let wx = map(0.0, 1.0);
+    let row: Vec<u8> = (0..n).map(|_| noise.byte()).collect();
+    let (mut chosen, mut portable) = (row.clone(), row.clone());
+    blend_row(&mut chosen, &wx, 0.7, 0.3, &top, &bottom);
+    blend_row_portable(&mut portable, &wx, 0.7, 0.3, &top, &bottom);
+    assert_eq!(chosen, portable);
+    assert_ne!(chosen, row);
+
+    // Rows long enough for whole blocks and a tail.
+    let rows: Vec<&[u8]> = row.chunks_exact(n / 3).collect();
+    let weights = [0.25, 0.5, 0.25];
+    let (mut chosen, mut portable) = (vec![0.0; n / 3], vec![0.0; n / 3]);
+    weighted_sum(&mut chosen, &rows, &weights);
+    weighted_sum_portable(&mut portable, &rows, &weights);
+    let bits = |v: Vec<f32>| -> Vec<u32> { v.into_iter().map(f32::to_bits).collect() };
+    assert_eq!(bits(chosen), bits(portable));
+}
