@@ -73,7 +73,9 @@ fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
         };
         out.push(to_rgb(&buffer, &caps));
     }
-    pipeline.set_state(gst::State::Null).map_err(|e| e.to_string())?;
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
     if out.is_empty() {
         return Err(format!("no frames decoded from {}", path.display()));
     }
@@ -118,7 +120,9 @@ fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<RgbImage>, String> 
         out.push(to_rgb(&sample.buffer_owned().expect("a buffer"), &caps));
     }
     let _ = src.end_of_stream();
-    pipeline.set_state(gst::State::Null).map_err(|e| e.to_string())?;
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
     Ok(out)
 }
 
@@ -194,13 +198,16 @@ fn main() -> Result<(), String> {
     let root = checkout();
     let media = flag("--media").map_or_else(|| root.join("target/real-media"), PathBuf::from);
     let out = flag("--out").map_or_else(|| root.join("results/real"), PathBuf::from);
-    let target = flag("--target")
-        .map_or_else(|| root.join("models/targets/sunset.png"), PathBuf::from);
-    let frames: usize = flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
+    let target =
+        flag("--target").map_or_else(|| root.join("models/targets/sunset.png"), PathBuf::from);
+    let frames: usize =
+        flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
-    println!("| clip | frames | box edge max % | box edge median % | mottling median % | pumping (levels) |");
+    println!(
+        "| clip | frames | box edge max % | box edge median % | mottling median % | pumping (levels) |"
+    );
     println!("|---|---|---|---|---|---|");
     for (name, file) in clips {
         let path = media.join(file);

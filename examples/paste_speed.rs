@@ -1,0 +1,189 @@
+//! Times the crop (`sample_crop`) and the paste (`LightingChange::apply`) on
+//! synthetic frames, without GStreamer, as the element runs them: the default
+//! full-height crop, the 96 px network and a feather of 6% of the crop.
+//!
+//! ```text
+//! cargo run --release --example paste_speed -- [--rounds 41]
+//! ```
+//!
+//! Each round times every size and format once, in turn, so a busy machine
+//! slows all of them alike rather than whichever ran at that moment. Every
+//! frame is larger than the caches together or follows others that are, so the
+//! times include reading the frame from memory, as a decoded frame would be.
+
+use std::time::Instant;
+
+use gstlsydrelight::frame::{
+    Crop, Frame, FrameMut, LightingChange, PixelFormat, Plane, YuvMatrix, sample_crop,
+};
+
+const SIZES: [(&str, usize, usize); 4] = [
+    ("480p", 854, 480),
+    ("720p", 1280, 720),
+    ("1080p", 1920, 1080),
+    ("2160p", 3840, 2160),
+];
+const FORMATS: [PixelFormat; 3] = [PixelFormat::I420, PixelFormat::Nv12, PixelFormat::Bgrx];
+/// The default network's resolution.
+const RES: usize = 96;
+/// The element's default feather, as a fraction of the crop.
+const FEATHER: f64 = 0.06;
+const MATRIX: YuvMatrix = YuvMatrix::BT709_LIMITED;
+
+/// A frame's planes as (bytes, stride), filled with noise.
+struct Buffers {
+    format: PixelFormat,
+    width: usize,
+    height: usize,
+    planes: Vec<(Vec<u8>, usize)>,
+}
+
+impl Buffers {
+    fn new(format: PixelFormat, width: usize, height: usize, seed: u32) -> Buffers {
+        let (cw, ch) = (width.div_ceil(2), height.div_ceil(2));
+        let shapes = match format {
+            PixelFormat::I420 => vec![(width, height), (cw, ch), (cw, ch)],
+            PixelFormat::Nv12 => vec![(width, height), (2 * cw, ch)],
+            _ => vec![(4 * width, height)],
+        };
+        let mut state = seed | 1;
+        let planes = shapes
+            .into_iter()
+            .map(|(stride, rows)| {
+                let bytes = (0..stride * rows)
+                    .map(|_| {
+                        // xorshift32: cheap, deterministic, no dependency.
+                        state ^= state << 13;
+                        state ^= state >> 17;
+                        state ^= state << 5;
+                        (state >> 24) as u8
+                    })
+                    .collect();
+                (bytes, stride)
+            })
+            .collect();
+        Buffers {
+            format,
+            width,
+            height,
+            planes,
+        }
+    }
+
+    fn frame(&self) -> Frame<'_> {
+        let plane = |i: usize| {
+            let (data, stride) = &self.planes[i.min(self.planes.len() - 1)];
+            Plane {
+                data,
+                stride: *stride,
+            }
+        };
+        Frame {
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            planes: [plane(0), plane(1), plane(2)],
+            matrix: MATRIX,
+        }
+    }
+
+    fn frame_mut(&mut self) -> FrameMut<'_> {
+        let mut planes = self.planes.iter_mut().map(|(d, s)| (d.as_mut_slice(), *s));
+        let first = planes.next().expect("a plane");
+        let second = planes.next().unwrap_or((&mut [], 0));
+        let third = planes.next().unwrap_or((&mut [], 0));
+        FrameMut {
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            planes: [first, second, third],
+            matrix: MATRIX,
+        }
+    }
+}
+
+struct Case {
+    name: String,
+    buffers: Buffers,
+    crop: Crop,
+    feather: usize,
+    change: LightingChange,
+    crop_ms: Vec<f64>,
+    paste_ms: Vec<f64>,
+}
+
+/// "median (min-max)" of a list of times.
+fn summary(times: &mut [f64]) -> String {
+    times.sort_by(f64::total_cmp);
+    format!(
+        "{:7.3} ({:.3}-{:.3})",
+        times[times.len() / 2],
+        times[0],
+        times[times.len() - 1]
+    )
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    let mut rounds = 41;
+    while let Some(arg) = args.next() {
+        match arg.as_str() {
+            "--rounds" => {
+                rounds = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .expect("--rounds N")
+            }
+            other => panic!("unknown argument {other}; usage: paste_speed [--rounds N]"),
+        }
+    }
+
+    let mut cases: Vec<Case> = Vec::new();
+    for (label, width, height) in SIZES {
+        for format in FORMATS {
+            let buffers = Buffers::new(format, width, height, cases.len() as u32 + 7);
+            let crop = Crop::centred(width, height, 0.5, 0.5, 1.0);
+            let input = sample_crop(&buffers.frame(), crop, RES);
+            // A plausible change: darker overall, brighter towards one side.
+            let relit: Vec<f32> = input
+                .iter()
+                .enumerate()
+                .map(|(i, v)| (0.8 * v + 0.2 * (i % RES) as f32 / RES as f32).min(1.0))
+                .collect();
+            cases.push(Case {
+                name: format!("{label} {format:?}"),
+                change: LightingChange::new(&input, &relit, RES, format, MATRIX),
+                buffers,
+                crop,
+                feather: (FEATHER * crop.size as f64).round() as usize,
+                crop_ms: Vec::with_capacity(rounds),
+                paste_ms: Vec::with_capacity(rounds),
+            });
+        }
+    }
+
+    for _ in 0..rounds {
+        for case in &mut cases {
+            let start = Instant::now();
+            let image = sample_crop(&case.buffers.frame(), case.crop, RES);
+            case.crop_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            std::hint::black_box(image);
+
+            let start = Instant::now();
+            case.change
+                .apply(&mut case.buffers.frame_mut(), case.crop, case.feather);
+            case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+
+    println!("{rounds} rounds, ms per frame: median (min-max)");
+    println!("{:<12} {:>26} {:>26}", "", "crop", "paste");
+    for case in &mut cases {
+        println!(
+            "{:<12} {:>26} {:>26}",
+            case.name,
+            summary(&mut case.crop_ms),
+            summary(&mut case.paste_ms)
+        );
+    }
+}
