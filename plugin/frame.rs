@@ -420,13 +420,18 @@ pub fn mean_luma(img: &[f32]) -> f32 {
     (0..n).map(|i| luma(img, n, i)).sum::<f32>() / n as f32
 }
 
-/// The lighting change at network resolution, ready to be applied to a frame.
+/// The lighting change at network resolution, ready to be applied to a frame:
+/// per output channel (R, G, B or Y, Cb, Cr in 8-bit units) a pixel `v` becomes
+/// `R + g · (v − I)`, with R the relit image, I the network's input and g the gain
+/// of the frame's detail.
 pub struct LightingChange {
     res: usize,
-    /// Per output channel (R, G, B or Y, Cb, Cr in 8-bit units): base R and input I.
     base: [Vec<f32>; 3],
     input: [Vec<f32>; 3],
-    gain: Vec<f32>,
+    /// In RGB, each channel's own gain, so the change is a pure per-channel gain
+    /// of the frame (`R = g · I`): no halo at edges sharper than the network sees.
+    /// In YUV, the luma gain for all three.
+    gain: [Vec<f32>; 3],
 }
 
 impl LightingChange {
@@ -440,13 +445,20 @@ impl LightingChange {
         matrix: YuvMatrix,
     ) -> LightingChange {
         let n = res * res;
-        let relit = bound_invented_light(input, relit, n);
-        let gain = (0..n)
-            .map(|i| {
-                ((luma(&relit, n, i) + GAIN_EPSILON) / (luma(input, n, i) + GAIN_EPSILON))
-                    .clamp(0.0, MAX_GAIN)
+        let relit = smooth_gain_relit(input, &bound_invented_light(input, relit, n), res);
+        let ratio = |r: f32, i: f32| ((r + GAIN_EPSILON) / (i + GAIN_EPSILON)).clamp(0.0, MAX_GAIN);
+        let gain = if format.is_yuv() {
+            let luma_gain: Vec<f32> = (0..n)
+                .map(|i| ratio(luma(&relit, n, i), luma(input, n, i)))
+                .collect();
+            [luma_gain.clone(), luma_gain.clone(), luma_gain]
+        } else {
+            [0, 1, 2].map(|c| {
+                (c * n..(c + 1) * n)
+                    .map(|i| ratio(relit[i], input[i]))
+                    .collect()
             })
-            .collect();
+        };
         let to_channels = |img: &[f32]| -> [Vec<f32>; 3] {
             if format.is_yuv() {
                 let mut ch = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
@@ -555,7 +567,9 @@ impl LightingChange {
         let row = r * self.res..(r + 1) * self.res;
         // Per lane of a pixel, the rows it reads of the base, gain and input.
         let maps = lanes.map(|lane| {
-            lane.map(|c| [&self.base[c], &self.gain, &self.input[c]].map(|map| &map[row.clone()]))
+            lane.map(|c| {
+                [&self.base[c], &self.gain[c], &self.input[c]].map(|map| &map[row.clone()])
+            })
         });
         // a + (b − a) · t, with a and b − a (per map and lane) those of a map
         // column that the next few pixels share. They stay zero on padding.
@@ -601,6 +615,57 @@ fn bound_invented_light(input: &[f32], relit: &[f32], n: usize) -> Vec<f32> {
         }
     }
     out
+}
+
+/// Radius, as a fraction of the network's resolution, of the blur that keeps the
+/// network's colour noise out of the lighting change.
+const GAIN_SMOOTHING: f32 = 0.06;
+
+/// The relit image as the input times a smooth per-channel gain: the network's
+/// lighting change without its pixel-scale colour noise, which the transfer
+/// would otherwise paint onto the skin as blotches. The gain is blurred in the
+/// log domain over `GAIN_SMOOTHING` of the image.
+fn smooth_gain_relit(input: &[f32], relit: &[f32], res: usize) -> Vec<f32> {
+    let n = res * res;
+    let radius = ((GAIN_SMOOTHING * res as f32).round() as usize).max(1);
+    let mut out = vec![0f32; 3 * n];
+    for c in 0..3 {
+        let (i, r) = (&input[c * n..(c + 1) * n], &relit[c * n..(c + 1) * n]);
+        let log_gain: Vec<f32> = i
+            .iter()
+            .zip(r)
+            .map(|(i, r)| {
+                ((r + GAIN_EPSILON) / (i + GAIN_EPSILON))
+                    .clamp(1.0 / MAX_GAIN, MAX_GAIN)
+                    .ln()
+            })
+            .collect();
+        let smooth = box_blur(&box_blur(&log_gain, res, radius), res, radius);
+        for (k, o) in out[c * n..(c + 1) * n].iter_mut().enumerate() {
+            *o = (i[k] + GAIN_EPSILON) * smooth[k].exp() - GAIN_EPSILON;
+        }
+    }
+    out
+}
+
+/// A box blur of a res × res field, `radius` each way, shrinking at the borders.
+fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
+    let along = |src: &[f32], at: &dyn Fn(usize, usize) -> usize| {
+        let mut out = vec![0f32; src.len()];
+        let mut prefix = vec![0f32; res + 1];
+        for line in 0..res {
+            for k in 0..res {
+                prefix[k + 1] = prefix[k] + src[at(line, k)];
+            }
+            for k in 0..res {
+                let (lo, hi) = (k.saturating_sub(radius), (k + radius + 1).min(res));
+                out[at(line, k)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f32;
+            }
+        }
+        out
+    };
+    let rows = along(field, &|y, x| y * res + x);
+    along(&rows, &|x, y| y * res + x)
 }
 
 /// Bilinear taps from `size` samples of a frame onto `res` samples of a map:
@@ -753,7 +818,9 @@ impl Fade {
         if high_inner {
             w = w.min(from_high / self.feather);
         }
-        w.clamp(0.0, 1.0)
+        // Smoothstep: no kink where the fade starts or ends, which the eye reads as an edge.
+        let t = w.clamp(0.0, 1.0);
+        t * t * (3.0 - 2.0 * t)
     }
 
     /// `x` in frame pixels.

@@ -157,7 +157,11 @@ fn apply_channel(
             (lo, p - lo as f32)
         })
         .collect();
-    let (base, input, gain) = (&change.base[channel], &change.input[channel], &change.gain);
+    let (base, input, gain) = (
+        &change.base[channel],
+        &change.input[channel],
+        &change.gain[channel],
+    );
     let sample = |map: &[f32], (ly, ty): (usize, f32), (lx, tx): (usize, f32)| {
         let a = map[ly * res + lx];
         let b = map[ly * res + lx + 1];

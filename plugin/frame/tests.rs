@@ -230,7 +230,7 @@ fn random_change(res: usize, format: PixelFormat, wild: bool, noise: &mut Noise)
         res,
         base: channels(base),
         input: channels(input),
-        gain: (0..n).map(|_| noise.uniform(0.0, MAX_GAIN)).collect(),
+        gain: [0, 1, 2].map(|_| (0..n).map(|_| noise.uniform(0.0, MAX_GAIN)).collect()),
     }
 }
 
@@ -312,9 +312,9 @@ fn paste_matches_the_reference_where_the_maps_are_not_finite() {
         change.base[0][3] = f32::NAN;
         change.base[2][20] = f32::INFINITY;
         change.input[1][30] = f32::NEG_INFINITY;
-        change.gain[9] = f32::NAN;
+        change.gain[0][9] = f32::NAN;
         // Under the first chroma column, which has zero fade with an odd crop.
-        change.gain[7] = f32::NAN;
+        change.gain[1][7] = f32::NAN;
         for crop in crops(37, 29) {
             for feather in [0, 3] {
                 let (same, _) = paste_both(&buffers, &change, crop, feather);

@@ -18,7 +18,7 @@ const DEFAULT_MONITOR_TIMEOUT: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
-const DEFAULT_FEATHER: f64 = 0.06;
+const DEFAULT_FEATHER: f64 = 0.25;
 const DEFAULT_QOS: bool = true;
 
 /// The square face region, as fractions of the frame.

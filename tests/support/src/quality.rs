@@ -2,7 +2,7 @@
 //! (and, beside the exact errors, for the simulator's recordings):
 //!
 //! - [`box_edge_score`]: the largest straight, axis-aligned step in the smoothed
-//!   log ratio of output to input luminance that stays coherent over a fifth of
+//!   log ratio of output to input luma that stays coherent over a fifth of
 //!   the frame height, in percent: the visible edge of a relit box.
 //! - [`mottling`]: the colour part of the per-channel log gain (log gain less its
 //!   mean over the channels), less its smooth part (a box blur a quarter of the
@@ -15,8 +15,9 @@
 
 use deskstage::monitor::RgbImage;
 
-/// Keeps the log of black finite: a level of 8-bit sRGB near black, in linear light.
-const LOG_EPSILON: f64 = 3e-4;
+/// Added to sRGB values in [0, 1] before taking logs: two levels, so the
+/// rounding of near-black pixels does not count as a large ratio.
+const LOG_EPSILON: f64 = 2.0 / 255.0;
 
 /// A square region of an image, in pixels.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -24,15 +25,6 @@ pub struct Region {
     pub x: usize,
     pub y: usize,
     pub size: usize,
-}
-
-fn srgb_to_linear(v: u8) -> f64 {
-    let v = v as f64 / 255.0;
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// Per pixel: the natural log of output over input of `value(pixel)`.
@@ -50,8 +42,10 @@ fn log_ratio(input: &RgbImage, output: &RgbImage, value: impl Fn(&[u8]) -> f64) 
         .collect()
 }
 
-fn luminance(p: &[u8]) -> f64 {
-    0.2126 * srgb_to_linear(p[0]) + 0.7152 * srgb_to_linear(p[1]) + 0.0722 * srgb_to_linear(p[2])
+/// Rec. 709 luma of an sRGB pixel, in [0, 1]. Ratios of sRGB values are what a
+/// gain applied to the picture changes, whatever the brightness underneath.
+fn luma(p: &[u8]) -> f64 {
+    (0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64) / 255.0
 }
 
 /// Box blur of radius `r` (a (2r+1)² box, clipped at the borders) of a w × h field.
@@ -80,7 +74,7 @@ pub fn box_edge_score(input: &RgbImage, output: &RgbImage) -> f64 {
     let (w, h) = (input.width, input.height);
     // Smoothed over about 1% of the frame height, so noise and texture do not count.
     let r = (h / 100).max(1);
-    let ratio = box_blur(&log_ratio(input, output, luminance), w, h, r);
+    let ratio = box_blur(&log_ratio(input, output, luma), w, h, r);
     let step = 2 * r;
     let run = (h / 5).max(1);
     // Vertical edges: steps across x, averaged along a run of y; horizontal edges
@@ -122,7 +116,7 @@ fn coherent_step(
 /// Mottling of a relit frame against its input over `face`, in percent.
 pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
     let (w, h) = (input.width, input.height);
-    let channel_gain = |c: usize| log_ratio(input, output, |p| srgb_to_linear(p[c]));
+    let channel_gain = |c: usize| log_ratio(input, output, |p| p[c] as f64 / 255.0);
     let gains = [channel_gain(0), channel_gain(1), channel_gain(2)];
     let radius = (face.size / 8).max(1);
     let mut sum = 0.0;
@@ -191,7 +185,11 @@ mod tests {
         let input = image(w, h, |x, y| [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90]);
         let boxed = image(w, h, |x, y| {
             let p = [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90];
-            if (80..240).contains(&x) { p.map(|v| v.saturating_add(25)) } else { p }
+            if (80..240).contains(&x) {
+                p.map(|v| v.saturating_add(40))
+            } else {
+                p
+            }
         });
         let smooth = image(w, h, |x, y| {
             let p = [(x % 100) as u8 + 50, (y % 90) as u8 + 50, 90];
@@ -207,11 +205,19 @@ mod tests {
     #[test]
     fn colour_blotches_mottle_and_an_even_tint_does_not() {
         let (w, h) = (128, 128);
-        let face = Region { x: 32, y: 32, size: 64 };
+        let face = Region {
+            x: 32,
+            y: 32,
+            size: 64,
+        };
         let input = image(w, h, |_, _| [150, 120, 100]);
         let tinted = image(w, h, |_, _| [165, 120, 95]);
         let blotched = image(w, h, |x, y| {
-            if (x / 4 + y / 4) % 2 == 0 { [170, 112, 100] } else { [140, 128, 100] }
+            if (x / 4 + y / 4) % 2 == 0 {
+                [170, 112, 100]
+            } else {
+                [140, 128, 100]
+            }
         });
         assert!(mottling(&input, &tinted, face) < 0.5);
         assert!(mottling(&input, &blotched, face) > 5.0);
@@ -221,7 +227,9 @@ mod tests {
     fn pumping_is_the_95th_percentile_step() {
         let steady = vec![3.0; 40];
         assert_eq!(pumping(&steady), 0.0);
-        let breathing: Vec<f64> = (0..40).map(|i| if i % 10 < 5 { 0.0 } else { 7.0 }).collect();
+        let breathing: Vec<f64> = (0..40)
+            .map(|i| if i % 10 < 5 { 0.0 } else { 7.0 })
+            .collect();
         assert!((pumping(&breathing) - 7.0).abs() < 1e-9);
     }
 }
