@@ -21,7 +21,7 @@ use lsydrelight_testkit::{
     checkout, default_model,
     flags::flag,
     init,
-    quality::{Region, box_edge_score, mean_change, mottling, pumping},
+    quality::{Region, box_edge_score, mean_level, mottling, pumping},
     video::{FRAME, frame_time, rgb_caps, to_rgb},
 };
 
@@ -175,10 +175,10 @@ fn measure(
         .zip(&output)
         .map(|(i, o)| mottling(i, o, region))
         .collect();
-    let changes: Vec<f64> = input
+    let means: Vec<(f64, f64)> = input
         .iter()
         .zip(&output)
-        .map(|(i, o)| mean_change(i, o, region))
+        .map(|(i, o)| (mean_level(i, region), mean_level(o, region)))
         .collect();
     let shown = input.len() / 2;
     let image = out.join(format!("{name}-before-after.png"));
@@ -190,7 +190,7 @@ fn measure(
         box_edge_max: edges.iter().copied().fold(0.0, f64::max),
         box_edge_median: median(edges),
         mottling_median: median(mottled),
-        pumping: pumping(&changes),
+        pumping: pumping(&means),
     })
 }
 

@@ -42,6 +42,7 @@ fn source_light_is_the_papers_weighted_average() {
         alpha: 1.0,
         beta,
         average_frames: 3,
+        ..Temporal::default()
     });
     let img = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let lights = [0.9f32, 0.1, 0.5, 0.3].map(|v| Light::uniform([v, v * 0.5, v * 0.25]));
@@ -78,6 +79,7 @@ fn features_are_smoothed_exponentially() {
         alpha,
         beta: 0.6,
         average_frames: 1,
+        ..Temporal::default()
     });
     let a = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let b = image(&r, deskstage::math::Vec3::new(0.3, 0.3, 0.6));
@@ -145,6 +147,7 @@ fn unknown_source_uses_the_predicted_light() {
         alpha: 1.0,
         beta: 0.6,
         average_frames: 1,
+        ..Temporal::default()
     });
     let img = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let out = r.relight(&img, Source::Unknown, false).unwrap();
@@ -155,6 +158,22 @@ fn unknown_source_uses_the_predicted_light() {
     );
     assert!(predicted.0.iter().all(|v| (0.0..=1.0).contains(v)));
     assert_eq!(r.counts().predictions, 1);
+    // The next frame's prediction is smoothed with this one.
+    let blue = image(&r, deskstage::math::Vec3::new(0.2, 0.2, 1.0));
+    let next = r.relight(&blue, Source::Unknown, false).unwrap();
+    let raw = next.predicted.expect("unknown source predicts");
+    let w = Temporal::default().prediction_weight;
+    let expected: Vec<f32> = predicted
+        .0
+        .iter()
+        .zip(&raw.0)
+        .map(|(p, n)| p + w * (n - p))
+        .collect();
+    assert!(max_diff(&next.source.0, &expected) < 1e-6);
+    assert!(
+        max_diff(&raw.0, &predicted.0) > 0.01,
+        "the two frames' predictions differ"
+    );
     let known = r
         .relight(&img, Source::Known(Light::uniform([1.0; 3])), false)
         .unwrap();

@@ -22,7 +22,7 @@ use std::fmt;
 
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
-use super::temporal::{FeatureSmoother, SourceLightAverager, Temporal};
+use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
 use crate::engine::contract::PRESENCE_SIZE;
 use crate::frame::{Crop, Frame, LightingChange, mean_luma, sample_crop};
 use crate::light::Light;
@@ -222,6 +222,7 @@ pub struct FramePolicy {
     skips: Skips,
     averager: SourceLightAverager,
     smoother: FeatureSmoother,
+    predictions: PredictionSmoother,
     /// The target light and its code, computed once per target.
     target: Option<(Light, Vec<f32>)>,
     /// The source light of the last frame that ran the network, before averaging.
@@ -245,6 +246,7 @@ impl FramePolicy {
             skips,
             averager: SourceLightAverager::new(temporal.beta, temporal.average_frames),
             smoother: FeatureSmoother::new(temporal.alpha),
+            predictions: PredictionSmoother::new(temporal.prediction_weight),
             target: None,
             last_source: None,
             last: None,
@@ -271,6 +273,7 @@ impl FramePolicy {
         let had_state = self.smoother.has_state() || !self.averager.is_empty();
         self.averager.reset();
         self.smoother.reset();
+        self.predictions.reset();
         self.last_source = None;
         self.last = None;
         if had_state {
@@ -285,6 +288,7 @@ impl FramePolicy {
             self.temporal = temporal;
             self.averager = SourceLightAverager::new(temporal.beta, temporal.average_frames);
             self.smoother = FeatureSmoother::new(temporal.alpha);
+            self.predictions = PredictionSmoother::new(temporal.prediction_weight);
             self.last = None;
         }
     }
@@ -461,6 +465,7 @@ impl FramePolicy {
         } else {
             None
         };
+        let known = matches!(source, Source::Known(_));
         let this_source = match source {
             Source::Known(l) => l,
             Source::Unknown => predicted.clone().expect("predicted above"),
@@ -469,6 +474,11 @@ impl FramePolicy {
             // A broken prediction must neither light this frame nor enter the average.
             return Ok(self.non_finite(predicted, this_source));
         }
+        let this_source = if known {
+            this_source
+        } else {
+            self.predictions.push(this_source)
+        };
         self.last_source = Some(this_source.clone());
         let averaged = timed(&mut self.counts.filter_seconds, || {
             self.averager.push(this_source)

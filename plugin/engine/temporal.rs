@@ -4,6 +4,10 @@
 //!   over the source lights of the last N face frames (β = 0.6, N = 3).
 //! - Feature smoothing: `f_t = α·f_t + (1−α)·f_{t−1}` on the de-lit features
 //!   f1..f7 (α = 0.7); α = 1 turns it off.
+//!
+//! Beyond the paper, a light predicted from the face (no monitor stream) is first
+//! smoothed exponentially, `P_t = w·p_t + (1−w)·P_{t−1}`: predictions wander from
+//! frame to frame with the face's own shading, and relit brightness would pump.
 
 use std::collections::VecDeque;
 
@@ -12,6 +16,7 @@ use crate::light::Light;
 pub const DEFAULT_BETA: f32 = 0.6;
 pub const DEFAULT_AVERAGE_FRAMES: usize = 3;
 pub const DEFAULT_ALPHA: f32 = 0.7;
+pub const DEFAULT_PREDICTION_WEIGHT: f32 = 0.2;
 
 /// Parameters of the two filters.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -21,6 +26,8 @@ pub struct Temporal {
     /// Source-light averaging β and frame count N; N = 1 turns averaging off.
     pub beta: f32,
     pub average_frames: usize,
+    /// Weight w of a new predicted light in its exponential smoothing; 1 turns it off.
+    pub prediction_weight: f32,
 }
 
 impl Default for Temporal {
@@ -29,6 +36,7 @@ impl Default for Temporal {
             alpha: DEFAULT_ALPHA,
             beta: DEFAULT_BETA,
             average_frames: DEFAULT_AVERAGE_FRAMES,
+            prediction_weight: DEFAULT_PREDICTION_WEIGHT,
         }
     }
 }
@@ -79,6 +87,42 @@ impl SourceLightAverager {
 
     pub fn is_empty(&self) -> bool {
         self.history.is_empty()
+    }
+}
+
+/// Exponential smoothing of predicted source lights across frames.
+#[derive(Clone, Debug)]
+pub struct PredictionSmoother {
+    weight: f32,
+    state: Option<Light>,
+}
+
+impl PredictionSmoother {
+    pub fn new(weight: f32) -> Self {
+        Self {
+            weight: weight.clamp(0.0, 1.0),
+            state: None,
+        }
+    }
+
+    /// Adds this frame's prediction and returns the smoothed one; the first after a
+    /// reset passes unchanged.
+    pub fn push(&mut self, light: Light) -> Light {
+        let smoothed = match self.state.take() {
+            Some(mut s) => {
+                for (p, n) in s.0.iter_mut().zip(&light.0) {
+                    *p += self.weight * (n - *p);
+                }
+                s
+            }
+            None => light,
+        };
+        self.state = Some(smoothed.clone());
+        smoothed
+    }
+
+    pub fn reset(&mut self) {
+        self.state = None;
     }
 }
 
@@ -219,6 +263,19 @@ mod tests {
             skipping.repeat_last();
         }
         assert_eq!(skipping.state(), every.state());
+    }
+
+    #[test]
+    fn predictions_are_smoothed_exponentially_and_reset() {
+        let mut p = PredictionSmoother::new(0.25);
+        assert_eq!(p.push(light(1.0)).0[0], 1.0);
+        assert!((p.push(light(0.0)).0[0] - 0.75).abs() < 1e-6);
+        assert!((p.push(light(0.0)).0[0] - 0.5625).abs() < 1e-6);
+        p.reset();
+        assert_eq!(p.push(light(0.2)).0[0], 0.2);
+        let mut off = PredictionSmoother::new(1.0);
+        off.push(light(1.0));
+        assert_eq!(off.push(light(0.3)).0[0], 0.3);
     }
 
     #[test]

@@ -101,6 +101,7 @@ impl Settings {
             "average-frames" => {
                 self.temporal.average_frames = v.get::<u32>().expect(checked) as usize
             }
+            "prediction-weight" => self.temporal.prediction_weight = v.get().expect(checked),
             "crop-x" => self.crop.x = v.get().expect(checked),
             "crop-y" => self.crop.y = v.get().expect(checked),
             "crop-size" => self.crop.size = v.get().expect(checked),
@@ -138,6 +139,7 @@ impl Settings {
             "alpha" => self.temporal.alpha.to_value(),
             "beta" => self.temporal.beta.to_value(),
             "average-frames" => (self.temporal.average_frames as u32).to_value(),
+            "prediction-weight" => self.temporal.prediction_weight.to_value(),
             "crop-x" => self.crop.x.to_value(),
             "crop-y" => self.crop.y.to_value(),
             "crop-size" => self.crop.size.to_value(),
@@ -229,6 +231,14 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .minimum(1)
                 .maximum(16)
                 .default_value(d.temporal.average_frames as u32)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecFloat::builder("prediction-weight")
+                .nick("Predicted light smoothing")
+                .blurb("Without a monitor stream, weight w of each frame's predicted light in its exponential smoothing, P = w*p_t + (1-w)*P_(t-1), so relit brightness does not pump; 1 turns it off")
+                .minimum(0.0)
+                .maximum(1.0)
+                .default_value(d.temporal.prediction_weight)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecDouble::builder("crop-x")

@@ -8,8 +8,8 @@
 //!   mean over the channels), less its smooth part (a box blur a quarter of the
 //!   face wide), as RMS in percent over the face: blotchy skin.
 //! - [`pumping`]: the 95th percentile of the frame-to-frame change of the face
-//!   region's mean (output minus input), in levels: brightness that breathes
-//!   while the input is steady.
+//!   region's mean (output minus input), in levels, leaving out cuts: brightness
+//!   that breathes while the input is steady.
 //!
 //! Images are packed 8-bit sRGB ([`RgbImage`]).
 
@@ -138,27 +138,30 @@ pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
     100.0 * (sum / count.max(1) as f64).sqrt()
 }
 
-/// Mean of output minus input over `face`, in 8-bit levels.
-pub fn mean_change(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
-    let w = input.width;
+/// A change of the input's face-region mean, in levels, that counts as a cut.
+const CUT_LEVELS: f64 = 8.0;
+
+/// Mean over `face` of all three channels, in 8-bit levels.
+pub fn mean_level(img: &RgbImage, face: Region) -> f64 {
+    let w = img.width;
     let mut sum = 0.0;
     let mut count = 0usize;
-    for y in face.y..(face.y + face.size).min(input.height) {
+    for y in face.y..(face.y + face.size).min(img.height) {
         let row = 3 * (y * w + face.x)..3 * (y * w + (face.x + face.size).min(w));
-        for (o, i) in output.data[row.clone()].iter().zip(&input.data[row]) {
-            sum += *o as f64 - *i as f64;
-            count += 1;
-        }
+        sum += img.data[row.clone()].iter().map(|&v| v as f64).sum::<f64>();
+        count += row.len();
     }
     sum / count.max(1) as f64
 }
 
-/// The 95th percentile of the frame-to-frame change of a series of
-/// [`mean_change`] values, in levels.
-pub fn pumping(mean_changes: &[f64]) -> f64 {
-    let mut steps: Vec<f64> = mean_changes
+/// The 95th percentile of the frame-to-frame change of the output's face-region
+/// mean less the input's, in levels, over the frames' `(input, output)` means;
+/// steps where the input's mean jumps by [`CUT_LEVELS`] (a cut) are left out.
+pub fn pumping(means: &[(f64, f64)]) -> f64 {
+    let mut steps: Vec<f64> = means
         .windows(2)
-        .map(|p| (p[1] - p[0]).abs())
+        .filter(|p| (p[1].0 - p[0].0).abs() < CUT_LEVELS)
+        .map(|p| ((p[1].1 - p[1].0) - (p[0].1 - p[0].0)).abs())
         .collect();
     if steps.is_empty() {
         return 0.0;
@@ -224,12 +227,23 @@ mod tests {
     }
 
     #[test]
-    fn pumping_is_the_95th_percentile_step() {
-        let steady = vec![3.0; 40];
+    fn pumping_is_the_95th_percentile_step_between_cuts() {
+        let steady = vec![(100.0, 103.0); 40];
         assert_eq!(pumping(&steady), 0.0);
-        let breathing: Vec<f64> = (0..40)
-            .map(|i| if i % 10 < 5 { 0.0 } else { 7.0 })
+        let breathing: Vec<(f64, f64)> = (0..40)
+            .map(|i| (100.0, if i % 10 < 5 { 100.0 } else { 107.0 }))
             .collect();
         assert!((pumping(&breathing) - 7.0).abs() < 1e-9);
+        // A cut moves input and output together by 50 levels: not pumping.
+        let cut: Vec<(f64, f64)> = (0..40)
+            .map(|i| {
+                if i < 20 {
+                    (100.0, 103.0)
+                } else {
+                    (150.0, 160.0)
+                }
+            })
+            .collect();
+        assert_eq!(pumping(&cut), 0.0);
     }
 }
