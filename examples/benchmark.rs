@@ -2,7 +2,12 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--out results/benchmark]
 //! ```
+//!
+//! `--stages` times where the element's time goes, every frame through the network,
+//! at 480p, 720p, 1080p and 2160p in I420, NV12 and BGRx, in interleaved rounds,
+//! and writes `<out>/stages.md` (medians with min-max) beside published anchors.
 //!
 //! For each variant (model, precision, threads, temporal filters, skips) a child
 //! process runs the test recordings through the real element and scores them
@@ -38,7 +43,7 @@ struct Variant {
     /// Further element properties, as gst-launch would set them.
     properties: Vec<(String, String)>,
     recordings: Vec<String>,
-    /// Frame sizes to time frame by frame.
+    /// Frame sizes to time frame by frame, in I420.
     latency_sizes: Vec<(u32, u32)>,
 }
 
@@ -61,6 +66,7 @@ struct RecordingResult {
 struct LatencyResult {
     width: u32,
     height: u32,
+    format: String,
     frames: usize,
     /// From a frame entering the element's face pad to it leaving `src`, one frame
     /// in flight at a time.
@@ -164,7 +170,13 @@ fn log_buffer_times(
     });
 }
 
-fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, String> {
+fn latency(
+    v: &Variant,
+    w: u32,
+    h: u32,
+    format: &str,
+    frames: usize,
+) -> Result<LatencyResult, String> {
     init();
     let recording = deskstage::dataset::Recording::standard("call").ok_or("no call recording")?;
     // Rendered beforehand, so the renderer does not compete with the element.
@@ -173,7 +185,7 @@ fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, 
     let src = rgb_source(480, 360);
     let scale = gst::parse::bin_from_description(
         &format!(
-            "videoscale ! videoconvert ! capsfilter caps=video/x-raw,format=I420,width={w},height={h}"
+            "videoscale ! videoconvert ! capsfilter caps=video/x-raw,format={format},width={w},height={h}"
         ),
         true,
     )
@@ -291,6 +303,7 @@ fn latency(v: &Variant, w: u32, h: u32, frames: usize) -> Result<LatencyResult, 
     Ok(LatencyResult {
         width: w,
         height: h,
+        format: format.to_string(),
         frames: frames_out,
         p50_ms: pct(0.5),
         p99_ms: pct(0.99),
@@ -334,7 +347,7 @@ fn run_child(v: Variant) -> Result<VariantResult, String> {
     let latency = v
         .latency_sizes
         .iter()
-        .map(|&(w, h)| latency(&v, w, h, 150))
+        .map(|&(w, h)| latency(&v, w, h, "I420", 150))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(VariantResult {
         cpu_seconds_per_frame: cpu,
@@ -465,6 +478,74 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
     v
 }
 
+/// Published per-frame figures of NVIDIA Maxine's video relighting at 720p on
+/// data-centre GPUs (from the project's issue 11): anchors, not measured here.
+const MAXINE_720P_MS: [(&str, f64); 3] = [("T4", 54.0), ("A40", 17.1), ("L40", 8.0)];
+
+/// Where the time goes at each size and format, every frame through the network,
+/// in `rounds` interleaved rounds; a markdown table of medians and min-max.
+fn stages(rounds: usize) -> Result<String, String> {
+    let default = checkout().join("models/default");
+    let every_frame = Variant {
+        name: "default, every frame".into(),
+        group: "stages".into(),
+        model: default,
+        threads: 2,
+        properties: vec![("reuse-interval".into(), "1".into())],
+        recordings: vec![],
+        latency_sizes: vec![],
+    };
+    let cases: Vec<((u32, u32), &str)> = [(854, 480), (1280, 720), (1920, 1080), (3840, 2160)]
+        .into_iter()
+        .flat_map(|size| ["I420", "NV12", "BGRx"].map(|format| (size, format)))
+        .collect();
+    let mut runs: Vec<Vec<LatencyResult>> = cases.iter().map(|_| Vec::new()).collect();
+    for round in 0..rounds {
+        for (&((w, h), format), results) in cases.iter().zip(&mut runs) {
+            eprintln!("stages: round {} {w}x{h} {format}", round + 1);
+            results.push(latency(&every_frame, w, h, format, 60)?);
+        }
+    }
+    let spread = |xs: Vec<f64>| {
+        let mut xs = xs;
+        xs.sort_by(f64::total_cmp);
+        let median = xs[xs.len() / 2];
+        format!("{median:.2} ({:.2}-{:.2})", xs[0], xs[xs.len() - 1])
+    };
+    let anchors: Vec<String> = MAXINE_720P_MS
+        .iter()
+        .map(|(gpu, ms)| format!("{ms} ms on {gpu}"))
+        .collect();
+    let mut out = vec![
+        format!(
+            "Per frame, every frame through the network, one frame in flight, 2 threads; \
+             median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
+             on this 2-core CPU. Published anchor, not measured here: NVIDIA Maxine video \
+             relighting at 720p, {}.",
+            anchors.join(", ")
+        ),
+        String::new(),
+        "| input | format | p50 ms | p99 ms | element ms | network | crop | paste | rest | fps |"
+            .into(),
+        "|---|---|---|---|---|---|---|---|---|---|".into(),
+    ];
+    for (((w, h), format), results) in cases.iter().zip(&runs) {
+        let col = |f: &dyn Fn(&LatencyResult) -> f64| spread(results.iter().map(f).collect());
+        out.push(format!(
+            "| {w}x{h} | {format} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            col(&|x| x.p50_ms),
+            col(&|x| x.p99_ms),
+            col(&|x| x.processing_ms),
+            col(&|x| x.network_ms),
+            col(&|x| x.crop_ms),
+            col(&|x| x.paste_ms),
+            col(&|x| x.processing_ms - x.network_ms - x.crop_ms - x.paste_ms),
+            col(&|x| x.fps),
+        ));
+    }
+    Ok(out.join("\n") + "\n")
+}
+
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("--child") {
@@ -478,6 +559,15 @@ fn main() -> Result<(), String> {
         .unwrap_or_else(|| checkout().join("results/benchmark"));
     let quick = args.iter().any(|a| a == "--quick");
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
+    if args.iter().any(|a| a == "--stages") {
+        let rounds = flag("--rounds").map_or(Ok(3), |r| r.parse().map_err(|_| "bad --rounds"))?;
+        let table = stages(rounds)?;
+        let path = out.join("stages.md");
+        std::fs::write(&path, &table).map_err(|e| e.to_string())?;
+        print!("{table}");
+        eprintln!("wrote {}", path.display());
+        return Ok(());
+    }
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let mut results = Vec::new();
     for v in variants(&checkout(), quick) {
