@@ -165,7 +165,8 @@ impl LsydRelight {
                 gst::trace!(
                     CAT,
                     imp = self,
-                    "face frame at {face_rt:?}: waiting for monitor frames"
+                    "face frame at {}: waiting for monitor frames",
+                    face_rt.display()
                 );
                 return None;
             }
@@ -173,7 +174,9 @@ impl LsydRelight {
                 gst::debug!(
                     CAT,
                     imp = self,
-                    "face frame at {face_rt:?}: source light from the monitor frame shown at {at} ns ({} consumed)",
+                    "face frame at {}: source light from the monitor frame shown at {} ({} consumed)",
+                    face_rt.display(),
+                    gst::ClockTime::from_nseconds(at.max(0) as u64),
                     reading.frames
                 );
                 (None, (Source::Known(light), Some(at)))
@@ -182,7 +185,8 @@ impl LsydRelight {
                 gst::debug!(
                     CAT,
                     imp = self,
-                    "face frame at {face_rt:?}: predicting the source light: {}",
+                    "face frame at {}: predicting the source light: {}",
+                    face_rt.display(),
                     f.describe()
                 );
                 (Some(f), (Source::Unknown, None))
@@ -234,8 +238,9 @@ impl LsydRelight {
             gst::debug!(
                 CAT,
                 imp = self,
-                "reset temporal state: {} before the frame at {rt:?}",
-                if discont { "a discontinuity" } else { "a gap" }
+                "reset temporal state: {} before the frame at {}",
+                if discont { "a discontinuity" } else { "a gap" },
+                rt.display()
             );
         }
         state.last_face_rt = rt.or(state.last_face_rt);
@@ -315,7 +320,12 @@ impl LsydRelight {
                 })
                 .map_err(|e| self.engine_failed(e))?
         };
-        gst::debug!(CAT, imp = self, "frame at {:?}: {outcome}", buffer.pts());
+        gst::debug!(
+            CAT,
+            imp = self,
+            "frame at {}: {outcome}",
+            buffer.pts().display()
+        );
         if let Some(change) = outcome.change {
             let pasting = Instant::now();
             let mut frame =
