@@ -3,12 +3,16 @@
 //!
 //! - [`detector`]: BlazeFace short-range (`models/face/blazeface.onnx`) through
 //!   ONNX Runtime: a frame to the faces in it ([`FaceBox`]).
+//! - [`tracker`]: pure logic over the detector's answers: when to run it,
+//!   which face to follow, smoothing, and a fade when the face goes or comes.
 //! - Here: the face box, the square crop and the one rule between them
 //!   ([`crop_from_face`]), and the small resampler both use ([`sample_square`]).
 
 pub mod detector;
+pub mod tracker;
 
 pub use detector::{DetectorError, FaceDetector};
+pub use tracker::{FaceTracker, Tracked, TrackerSettings};
 
 use crate::frame::{Crop, Frame};
 
