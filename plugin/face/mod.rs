@@ -44,17 +44,6 @@ impl FaceBox {
     pub fn area(&self) -> f32 {
         self.width * self.height
     }
-
-    /// Intersection over union of the two boxes.
-    pub fn iou(&self, other: &FaceBox) -> f32 {
-        let overlap = |c0: f32, s0: f32, c1: f32, s1: f32| {
-            ((c0 + s0 / 2.0).min(c1 + s1 / 2.0) - (c0 - s0 / 2.0).max(c1 - s1 / 2.0)).max(0.0)
-        };
-        let inter = overlap(self.cx, self.width, other.cx, other.width)
-            * overlap(self.cy, self.height, other.cy, other.height);
-        let union = self.area() + other.area() - inter;
-        if union > 0.0 { inter / union } else { 0.0 }
-    }
 }
 
 /// A square region of a frame, in the frame's pixels: centre and side.
@@ -218,15 +207,6 @@ mod tests {
             score: 0.9,
             keypoints: [[cx, cy]; 6],
         }
-    }
-
-    #[test]
-    fn iou_of_a_box_with_itself_is_one_and_with_a_distant_one_zero() {
-        let a = face(100.0, 100.0, 50.0);
-        assert!((a.iou(&a) - 1.0).abs() < 1e-6);
-        assert_eq!(a.iou(&face(300.0, 100.0, 50.0)), 0.0);
-        // Shifted by half its width: a third of the union.
-        assert!((a.iou(&face(125.0, 100.0, 50.0)) - 1.0 / 3.0).abs() < 1e-6);
     }
 
     #[test]

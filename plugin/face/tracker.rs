@@ -121,10 +121,6 @@ impl FaceTracker {
         }
     }
 
-    pub fn settings(&self) -> &TrackerSettings {
-        &self.settings
-    }
-
     /// One frame at `time` seconds: runs `detect` on it if needed and returns its
     /// crop and fade weight. An error of `detect` is returned as it is, and the
     /// frame then does not count.
@@ -134,24 +130,26 @@ impl FaceTracker {
         time: f64,
         detect: impl FnOnce(&Frame) -> Result<Vec<FaceBox>, E>,
     ) -> Result<Tracked, E> {
-        if let Some(m) = &mut self.missing_for {
-            *m += 1;
-        }
         let confidence = self.reference.as_ref().map_or(0.0, |r| r.confidence(frame));
         let due = self.frames_since_detection + 1 >= self.settings.detect_interval;
         let detected = self.reference.is_none() || due || confidence < self.settings.min_confidence;
-        if detected {
-            let faces = detect(frame)?;
-            self.observe(&faces);
-            let region = self
-                .followed
-                .map(thumbnail_region)
-                .or(self.reference.as_ref().map(|r| r.region))
-                .unwrap_or_else(|| Square::centred(frame.width, frame.height));
-            self.reference = Some(Thumbnail::of(frame, region));
-            self.frames_since_detection = 0;
-        } else {
-            self.frames_since_detection += 1;
+        let faces = if detected { Some(detect(frame)?) } else { None };
+
+        if let Some(m) = &mut self.missing_for {
+            *m += 1;
+        }
+        match faces {
+            Some(faces) => {
+                self.observe(&faces);
+                let region = self
+                    .followed
+                    .map(thumbnail_region)
+                    .or(self.reference.as_ref().map(|r| r.region))
+                    .unwrap_or_else(|| Square::centred(frame.width, frame.height));
+                self.reference = Some(Thumbnail::of(frame, region));
+                self.frames_since_detection = 0;
+            }
+            None => self.frames_since_detection += 1,
         }
 
         let dt = match self.last_time {
@@ -390,6 +388,20 @@ mod tests {
         let out = run(&mut t, 0..12, |_| vec![face(160.0, 100.0, 50.0)]);
         let ran: Vec<usize> = (0..12).filter(|&i| out[i].detected).collect();
         assert_eq!(ran, vec![0, 5, 10]);
+    }
+
+    #[test]
+    fn a_failed_detection_leaves_the_tracker_as_it_was() {
+        let data = grey();
+        let frame = Frame::packed_rgb(&data, 320, 240);
+        let mut t = FaceTracker::new(TrackerSettings::default());
+        assert!(t.track(&frame, 0.0, |_| Err("inference failed")).is_err());
+        let out = t
+            .track(&frame, 1.0 / 30.0, |_| {
+                Ok::<_, &str>(vec![face(160.0, 100.0, 50.0)])
+            })
+            .unwrap();
+        assert!(out.detected && out.face.is_some());
     }
 
     #[test]
