@@ -10,6 +10,7 @@
 //! - [`paths`]: where the default model and ONNX Runtime are found.
 
 pub mod engine;
+pub mod face;
 pub mod frame;
 pub mod light;
 pub mod lsydrelight;

@@ -24,7 +24,7 @@ use crate::material::{Ambient, AmbientKind, Look, NEUTRAL};
 use crate::math::Vec3;
 use crate::mesh::landmarks_3d;
 use crate::monitor::{CellLight, RgbImage};
-use crate::motion::{Range, Trajectory};
+use crate::motion::{Range, Trajectory, Waypoint};
 use crate::render::{Renderer, Scene, Sensor};
 use crate::rng::{Rng, hash, label};
 use crate::subject::{Expression, Pose, State, Subject};
@@ -300,6 +300,7 @@ pub fn heldout_states() -> Vec<State> {
         pitch: pitch.to_radians(),
         roll: roll.to_radians(),
         translation: Vec3::new(t.0, t.1, t.2),
+        body: Vec3::ZERO,
         present: true,
     };
     let ex = |mouth_open: f32, smile: f32, blink: f32| Expression {
@@ -373,6 +374,7 @@ pub fn validation_states(subject_seed: u64) -> Vec<State> {
                     r.range(-0.02, 0.02),
                     r.range(-0.06, 0.06),
                 ),
+                body: Vec3::ZERO,
                 present: true,
             },
             expression: Expression {
@@ -505,11 +507,71 @@ pub struct RecordingSpec {
     /// Seconds between the monitor showing a frame and its light reaching the
     /// recorded face (display plus camera latency).
     pub display_latency: f64,
+    /// A walk about the room instead of sitting at the desk (`wander`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path: Option<Vec<Waypoint>>,
 }
 
+/// `wander`'s walk: from the left of the frame to its middle, nearer; to the right
+/// and farther; out of the frame on the right. Out of sight (away, 6.5 s to 7.5 s)
+/// the person goes round to the left, and walks back in to the left of the middle.
+const WANDER: [Waypoint; 10] = [
+    Waypoint {
+        t: 0.0,
+        yaw_deg: 12.0,
+        body: [-0.22, 0.02, 0.05],
+    },
+    Waypoint {
+        t: 0.8,
+        yaw_deg: 12.0,
+        body: [-0.22, 0.02, 0.05],
+    },
+    Waypoint {
+        t: 2.3,
+        yaw_deg: -5.0,
+        body: [-0.02, 0.0, -0.14],
+    },
+    Waypoint {
+        t: 3.0,
+        yaw_deg: -5.0,
+        body: [-0.02, 0.0, -0.14],
+    },
+    Waypoint {
+        t: 4.6,
+        yaw_deg: -15.0,
+        body: [0.22, 0.04, 0.22],
+    },
+    Waypoint {
+        t: 5.3,
+        yaw_deg: -15.0,
+        body: [0.22, 0.04, 0.22],
+    },
+    Waypoint {
+        t: 6.5,
+        yaw_deg: -20.0,
+        body: [0.85, -0.02, 0.25],
+    },
+    Waypoint {
+        t: 7.5,
+        yaw_deg: 20.0,
+        body: [-0.85, 0.0, 0.10],
+    },
+    Waypoint {
+        t: 8.7,
+        yaw_deg: 8.0,
+        body: [-0.12, 0.01, 0.0],
+    },
+    Waypoint {
+        t: 10.0,
+        yaw_deg: 8.0,
+        body: [-0.12, 0.01, 0.0],
+    },
+];
+
 impl RecordingSpec {
-    /// The standard recordings: `steady`, `slow`, `cuts`, `walkaway`, and `call`,
-    /// the mixed one the demo relights. 300 frames at 30 fps, 480×360.
+    /// The standard recordings: `steady`, `slow`, `cuts`, `walkaway`, `call`, the
+    /// mixed one the demo relights, and `wander`, the person walking about the
+    /// frame and out of it. 300 frames at 30 fps, 480×360 (`wander` 640×360).
     pub fn standard(name: &str) -> Option<RecordingSpec> {
         let (style, away) = match name {
             "steady" => ("steady", None),
@@ -517,23 +579,27 @@ impl RecordingSpec {
             "cuts" => ("cuts", None),
             "walkaway" => ("capture", Some((4.0, 6.5))),
             "call" => ("capture", Some((7.5, 8.5))),
+            "wander" => ("capture", Some((6.5, 7.5))),
             _ => return None,
         };
+        let wander = name == "wander";
         Some(RecordingSpec {
             name: name.into(),
             subject_seed: crate::subject::DEFAULT_SUBJECT_SEED,
             seed: label(name),
             frames: 300,
             fps: 30,
-            width: 480,
+            width: if wander { 640 } else { 480 },
             height: 360,
             style: style.into(),
             away,
             display_latency: 0.0,
+            path: wander.then(|| WANDER.to_vec()),
         })
     }
 
-    pub const STANDARD: [&'static str; 5] = ["steady", "slow", "cuts", "walkaway", "call"];
+    pub const STANDARD: [&'static str; 6] =
+        ["steady", "slow", "cuts", "walkaway", "call", "wander"];
 
     fn style(&self) -> Style {
         match self.style.as_str() {
@@ -583,6 +649,9 @@ impl Recording {
             Range::CALL,
             0.4,
         );
+        if let Some(path) = &spec.path {
+            motion = motion.along(path);
+        }
         if let Some((a, b)) = spec.away {
             motion = motion.with_absence(a, b);
         }
@@ -614,6 +683,11 @@ impl Recording {
         frame as f64 / self.spec.fps as f64
     }
 
+    /// The person's pose and expression at frame `i`, without rendering it.
+    pub fn state(&self, i: usize) -> State {
+        self.motion.state(self.time(i))
+    }
+
     /// The monitor frame shown at time `t`.
     pub fn monitor_frame(&self, t: f64) -> RgbImage {
         self.playlist.frame(t)
@@ -632,7 +706,7 @@ impl Recording {
     /// for the targets (all of them when `with_truth`, none otherwise).
     pub fn frame(&self, i: usize, with_truth: bool) -> RecordedFrame {
         let t = self.time(i);
-        let state = self.motion.state(t);
+        let state = self.state(i);
         let monitor = self.monitor_frame(t);
         let lit_by = self.monitor_frame((t - self.spec.display_latency).max(0.0));
         let source = light_of(&self.renderer, &lit_by);

@@ -96,11 +96,12 @@ pub struct Rig {
 impl Rig {
     pub fn new(state: &State) -> Rig {
         let t = state.pose.translation;
+        let origin = HEAD_REST + state.pose.body;
         Rig {
             rot: state.pose.rotation(),
-            head_origin: HEAD_REST + t,
+            head_origin: origin + t,
             // The torso follows the head's translation only partly.
-            torso_offset: HEAD_REST + t * 0.5,
+            torso_offset: origin + t * 0.5,
         }
     }
 

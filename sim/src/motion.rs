@@ -7,6 +7,8 @@
 
 use std::f64::consts::TAU;
 
+use serde::{Deserialize, Serialize};
+
 use crate::math::{Vec3, lerp, smoothstep};
 use crate::rng::Rng;
 use crate::subject::{Expression, Pose, State};
@@ -44,7 +46,18 @@ struct Key {
     pitch: f32,
     roll: f32,
     shift: Vec3,
+    body: Vec3,
     smile: f32,
+}
+
+/// A place on a walk about the room: at `t` seconds the person's head is turned
+/// by `yaw_deg` and their whole body has moved by `body` metres (x right, y down,
+/// z away from the camera) from the desk.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Waypoint {
+    pub t: f64,
+    pub yaw_deg: f32,
+    pub body: [f32; 3],
 }
 
 /// A person's motion over a stretch of time.
@@ -78,6 +91,7 @@ impl Trajectory {
                 r.range(-range.shift.y, range.shift.y),
                 r.range(-range.shift.z, range.shift.z),
             ),
+            body: Vec3::ZERO,
             smile: if r.chance(0.3) {
                 r.range(0.3, 1.0)
             } else {
@@ -119,6 +133,26 @@ impl Trajectory {
         self
     }
 
+    /// The same blinks and talking, with the person walking through `path`
+    /// instead of sitting: eased from waypoint to waypoint, holding the first
+    /// before it and the last after it.
+    pub fn along(mut self, path: &[Waypoint]) -> Trajectory {
+        assert!(path.len() >= 2, "a path has at least two waypoints");
+        self.keys = path
+            .iter()
+            .map(|w| Key {
+                t: w.t,
+                yaw: w.yaw_deg,
+                pitch: 0.0,
+                roll: 0.0,
+                shift: Vec3::ZERO,
+                body: Vec3::new(w.body[0], w.body[1], w.body[2]),
+                smile: 0.0,
+            })
+            .collect();
+        self
+    }
+
     /// The person's state at time `t` seconds.
     pub fn state(&self, t: f64) -> State {
         let present = !self.absent.iter().any(|&(a, b)| t >= a && t < b);
@@ -133,6 +167,7 @@ impl Trajectory {
             pitch: lerp(a.pitch, b.pitch, w).to_radians(),
             roll: lerp(a.roll, b.roll, w).to_radians(),
             translation: a.shift.lerp(b.shift, w),
+            body: a.body.lerp(b.body, w),
             present,
         };
         let blink = self
@@ -192,6 +227,23 @@ mod tests {
         assert!(a.state(1.9).pose.present);
         assert!(!a.state(3.0).pose.present);
         assert!(a.state(4.1).pose.present);
+    }
+
+    #[test]
+    fn a_walk_passes_its_waypoints_and_holds_the_last() {
+        let at = |t: f64, x: f32, yaw_deg: f32| Waypoint {
+            t,
+            yaw_deg,
+            body: [x, 0.0, 0.1],
+        };
+        let a = Trajectory::random(5, "rec", 4.0, Range::CALL, 0.5)
+            .along(&[at(0.0, -0.2, 0.0), at(2.0, 0.2, 10.0)]);
+        assert_eq!(a.state(0.0).pose.body, Vec3::new(-0.2, 0.0, 0.1));
+        assert!(a.state(1.0).pose.body.x.abs() < 1e-6, "halfway");
+        assert_eq!(a.state(3.0).pose.body, Vec3::new(0.2, 0.0, 0.1));
+        assert!((a.state(3.0).pose.yaw.to_degrees() - 10.0).abs() < 1e-4);
+        // Walking, not shifting in the chair.
+        assert_eq!(a.state(1.0).pose.translation, Vec3::ZERO);
     }
 
     #[test]

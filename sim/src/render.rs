@@ -330,7 +330,8 @@ impl Renderer {
         let coarse = self.shadow_mesh.build(&self.scene.subject, state);
         // Aimed at the middle of head and shoulders, wide enough for all of them:
         // every occluder is in view, so points outside the map are lit.
-        let target = HEAD_REST + state.pose.translation + Vec3::new(0.0, 0.13, 0.0);
+        let target =
+            HEAD_REST + state.pose.body + state.pose.translation + Vec3::new(0.0, 0.13, 0.0);
         let m = &self.scene.monitor;
         (0..m.groups())
             .into_par_iter()

@@ -130,8 +130,12 @@ pub struct Pose {
     pub pitch: f32,
     /// Rotation about the view axis in radians.
     pub roll: f32,
-    /// Head translation in metres from the rest position.
+    /// Head translation in metres from the rest position: shifting in the chair,
+    /// which the shoulders follow only partly.
     pub translation: Vec3,
+    /// Where the whole person (head and shoulders) has moved from the desk, in
+    /// metres: walking about the room, which the shoulders follow fully.
+    pub body: Vec3,
     /// False when the person has walked out of the frame.
     pub present: bool,
 }
@@ -143,6 +147,7 @@ impl Default for Pose {
             pitch: 0.0,
             roll: 0.0,
             translation: Vec3::ZERO,
+            body: Vec3::ZERO,
             present: true,
         }
     }

@@ -252,6 +252,7 @@ fn nothing_is_nan_or_inf_anywhere_in_range() {
                         pitch: (15.0 * p).to_radians(),
                         roll: (8.0 * roll).to_radians(),
                         translation: Vec3::new(0.04 * y, 0.03 * p, 0.08 * roll),
+                        body: Vec3::ZERO,
                         present: true,
                     },
                     expression: Expression {

@@ -1,0 +1,359 @@
+//! The face detector: MediaPipe's BlazeFace short-range through ONNX Runtime.
+//!
+//! `models/face/blazeface.onnx` (made, and checked against MediaPipe, by
+//! `train/lsyd/face_detector.py`; its card is `models/face/README.md`) takes the
+//! frame letterboxed to 128 × 128 and scores 896 SSD anchors. This module owns
+//! the steps around it: the letterbox, the anchors, decoding boxes and
+//! keypoints, weighted non-maximum suppression and the way back to frame pixels.
+//! It is MediaPipe's `face_detection_short_range` configuration throughout.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+use ort::environment::Environment;
+use ort::session::Session;
+use ort::session::builder::GraphOptimizationLevel;
+use ort::value::{TensorRef, ValueType};
+
+use super::{FaceBox, Square, sample_square};
+use crate::engine::EngineError;
+use crate::engine::runtime::inference;
+use crate::frame::Frame;
+
+/// Side of the network's square input.
+pub const INPUT_SIZE: usize = 128;
+/// Anchors the network scores.
+pub const ANCHORS: usize = 896;
+/// Lowest score of a face.
+pub const MIN_SCORE: f32 = 0.5;
+/// Boxes overlapping the best one by more than this IoU are merged into it.
+pub const SUPPRESSION_IOU: f32 = 0.3;
+/// Strides of the network's four anchor layers, in input pixels.
+const STRIDES: [usize; 4] = [8, 16, 16, 16];
+/// Values per anchor: box (x, y, w, h), then 6 keypoints (x, y).
+const REGRESSORS: usize = 16;
+/// How to make the model again, for error messages.
+const REMAKE: &str = "make it with `cd train && python -m lsyd.face_detector --out ../models/face`";
+
+/// Why the detector's model cannot be used.
+#[derive(Clone, Debug, PartialEq)]
+pub enum DetectorError {
+    Missing(PathBuf),
+    /// ONNX Runtime cannot load it: the file and its message.
+    Unreadable(PathBuf, String),
+    /// It is not BlazeFace short-range: the file and what differs.
+    Mismatch(PathBuf, String),
+}
+
+impl fmt::Display for DetectorError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            DetectorError::Missing(p) => write!(
+                f,
+                "the face detector model {} does not exist; the checkout ships it as \
+                 models/face/blazeface.onnx, or {REMAKE}",
+                p.display()
+            ),
+            DetectorError::Unreadable(p, e) => write!(
+                f,
+                "the face detector model {} cannot be loaded ({e}); {REMAKE}",
+                p.display()
+            ),
+            DetectorError::Mismatch(p, e) => write!(
+                f,
+                "the face detector model {} is not BlazeFace short-range: {e}; {REMAKE}",
+                p.display()
+            ),
+        }
+    }
+}
+
+impl std::error::Error for DetectorError {}
+
+/// A face before suppression, in fractions of the letterboxed square.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    /// xmin, ymin, xmax, ymax.
+    bounds: [f32; 4],
+    keypoints: [[f32; 2]; 6],
+    score: f32,
+}
+
+impl Candidate {
+    fn iou(&self, other: &Candidate) -> f32 {
+        let (a, b) = (self.bounds, other.bounds);
+        let w = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+        let h = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+        let inter = w * h;
+        let union = (a[2] - a[0]) * (a[3] - a[1]) + (b[2] - b[0]) * (b[3] - b[1]) - inter;
+        if union > 0.0 { inter / union } else { 0.0 }
+    }
+}
+
+pub struct FaceDetector {
+    session: Session,
+    /// Anchor centres in fractions of the input, in the network's output order.
+    anchors: Vec<[f32; 2]>,
+}
+
+impl FaceDetector {
+    /// Loads `path` (BlazeFace short-range as ONNX) on the CPU with `threads`
+    /// threads and checks its inputs and outputs.
+    pub fn new(
+        env: &Environment,
+        path: &Path,
+        threads: usize,
+    ) -> Result<FaceDetector, DetectorError> {
+        if !path.is_file() {
+            return Err(DetectorError::Missing(path.to_path_buf()));
+        }
+        let unreadable =
+            |e: &dyn fmt::Display| DetectorError::Unreadable(path.to_path_buf(), e.to_string());
+        let session = Session::builder(env)
+            .and_then(|b| {
+                b.with_optimization_level(GraphOptimizationLevel::Level3)
+                    .map_err(Into::into)
+            })
+            .and_then(|b| b.with_intra_threads(threads.max(1)).map_err(Into::into))
+            .and_then(|b| b.with_inter_threads(1).map_err(Into::into))
+            // It runs between the relighting network's stages; spinning threads would starve them.
+            .and_then(|b| b.with_intra_op_spinning(false).map_err(Into::into))
+            .and_then(|mut b| b.commit_from_file(path))
+            .map_err(|e| unreadable(&e))?;
+        check_session(&session).map_err(|e| DetectorError::Mismatch(path.to_path_buf(), e))?;
+        Ok(FaceDetector {
+            session,
+            anchors: anchors(),
+        })
+    }
+
+    /// The faces in `frame`, best score first, in the frame's pixels.
+    pub fn detect(&mut self, frame: &Frame) -> Result<Vec<FaceBox>, EngineError> {
+        // The letterbox: the frame centred in a black square of its longer side.
+        let letterbox = Square {
+            side: frame.width.max(frame.height) as f32,
+            ..Square::centred(frame.width, frame.height)
+        };
+        let rgb = sample_square(frame, letterbox, INPUT_SIZE);
+        let n = INPUT_SIZE * INPUT_SIZE;
+        let mut input = vec![0f32; 3 * n];
+        for (i, px) in rgb.iter().enumerate() {
+            for c in 0..3 {
+                input[c * n + i] = px[c] * 2.0 - 1.0;
+            }
+        }
+        let tensor = TensorRef::from_array_view(([1usize, 3, INPUT_SIZE, INPUT_SIZE], &input[..]))
+            .map_err(inference)?;
+        let outputs = self
+            .session
+            .run(ort::inputs!["input" => tensor])
+            .map_err(inference)?;
+        let values = |name: &str| {
+            outputs[name]
+                .try_extract_tensor::<f32>()
+                .map(|(_, v)| v)
+                .map_err(inference)
+        };
+        let candidates = decode(
+            &self.anchors,
+            values("regressors")?,
+            values("classificators")?,
+        );
+        let corner = [
+            letterbox.cx - letterbox.side / 2.0,
+            letterbox.cy - letterbox.side / 2.0,
+        ];
+        Ok(suppress(candidates)
+            .into_iter()
+            .map(|c| to_frame(&c, letterbox.side, corner))
+            .collect())
+    }
+}
+
+/// The anchors scoring at least [`MIN_SCORE`], their boxes and keypoints in
+/// fractions of the input square.
+fn decode(anchors: &[[f32; 2]], regressors: &[f32], logits: &[f32]) -> Vec<Candidate> {
+    let size = INPUT_SIZE as f32;
+    let mut out = Vec::new();
+    for (i, (&logit, anchor)) in logits.iter().zip(anchors).enumerate() {
+        // MediaPipe clips the logit before the sigmoid.
+        let score = 1.0 / (1.0 + (-logit.clamp(-100.0, 100.0)).exp());
+        if score < MIN_SCORE {
+            continue;
+        }
+        let r = &regressors[i * REGRESSORS..(i + 1) * REGRESSORS];
+        let (cx, cy) = (anchor[0] + r[0] / size, anchor[1] + r[1] / size);
+        let (hw, hh) = (r[2] / size / 2.0, r[3] / size / 2.0);
+        let keypoints = std::array::from_fn(|k| {
+            [
+                anchor[0] + r[4 + 2 * k] / size,
+                anchor[1] + r[5 + 2 * k] / size,
+            ]
+        });
+        out.push(Candidate {
+            bounds: [cx - hw, cy - hh, cx + hw, cy + hh],
+            keypoints,
+            score,
+        });
+    }
+    out
+}
+
+/// The anchor centres of BlazeFace short-range, in fractions of the input, in the
+/// network's output order.
+///
+/// MediaPipe's SSD anchors with strides 8, 16, 16, 16, aspect ratio 1 plus the
+/// interpolated scale (2 anchors a layer) and fixed anchor size (all 1 × 1, so
+/// only centres matter). Consecutive layers of one stride share a grid: a 16 × 16
+/// grid with 2 anchors a cell, then an 8 × 8 grid with 6; grid by grid, row by
+/// row, cell by cell.
+fn anchors() -> Vec<[f32; 2]> {
+    let mut out = Vec::with_capacity(ANCHORS);
+    let mut layer = 0;
+    while layer < STRIDES.len() {
+        let stride = STRIDES[layer];
+        let layers = STRIDES[layer..]
+            .iter()
+            .take_while(|&&s| s == stride)
+            .count();
+        let grid = INPUT_SIZE / stride;
+        for y in 0..grid {
+            for x in 0..grid {
+                let centre = [
+                    (x as f32 + 0.5) / grid as f32,
+                    (y as f32 + 0.5) / grid as f32,
+                ];
+                out.extend(std::iter::repeat_n(centre, 2 * layers));
+            }
+        }
+        layer += layers;
+    }
+    out
+}
+
+/// Weighted non-maximum suppression, as MediaPipe's: best first, every remaining
+/// candidate overlapping it by more than [`SUPPRESSION_IOU`] joins it, and the
+/// face is their score-weighted mean box and keypoints with the best one's score.
+/// Averaging the overlapping anchors steadies the box from frame to frame.
+fn suppress(mut candidates: Vec<Candidate>) -> Vec<Candidate> {
+    candidates.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut faces = Vec::new();
+    while let Some(best) = candidates.first().copied() {
+        let (group, rest): (Vec<Candidate>, Vec<Candidate>) = candidates
+            .into_iter()
+            .partition(|c| best.iou(c) > SUPPRESSION_IOU);
+        candidates = rest;
+        let total: f32 = group.iter().map(|c| c.score).sum();
+        let mut face = Candidate {
+            bounds: [0.0; 4],
+            keypoints: [[0.0; 2]; 6],
+            score: best.score,
+        };
+        for c in &group {
+            let w = c.score / total;
+            for (m, v) in face.bounds.iter_mut().zip(c.bounds) {
+                *m += w * v;
+            }
+            for (m, v) in face.keypoints.iter_mut().zip(c.keypoints) {
+                m[0] += w * v[0];
+                m[1] += w * v[1];
+            }
+        }
+        faces.push(face);
+    }
+    faces
+}
+
+/// A face in fractions of the letterboxed square (of `side` frame pixels, its
+/// top-left corner at `corner`) in frame pixels.
+fn to_frame(c: &Candidate, side: f32, corner: [f32; 2]) -> FaceBox {
+    let [x0, y0, x1, y1] = c.bounds;
+    let px = |v: f32, axis: usize| corner[axis] + v * side;
+    FaceBox {
+        cx: px((x0 + x1) / 2.0, 0),
+        cy: px((y0 + y1) / 2.0, 1),
+        width: (x1 - x0) * side,
+        height: (y1 - y0) * side,
+        score: c.score,
+        keypoints: c.keypoints.map(|[x, y]| [px(x, 0), px(y, 1)]),
+    }
+}
+
+/// The session must be BlazeFace short-range's: `input` [1, 3, 128, 128],
+/// `regressors` [1, 896, 16], `classificators` [1, 896, 1], all float32.
+fn check_session(session: &Session) -> Result<(), String> {
+    let describe = |o: &ort::value::Outlet| match o.dtype() {
+        ValueType::Tensor { ty, shape, .. } => format!("{} {:?} {ty:?}", o.name(), shape.to_vec()),
+        other => format!("{} {other:?}", o.name()),
+    };
+    let want_in = [format!(
+        "input {:?} Float32",
+        [1, 3, INPUT_SIZE, INPUT_SIZE]
+    )];
+    let want_out = [
+        format!("regressors {:?} Float32", [1, ANCHORS, REGRESSORS]),
+        format!("classificators {:?} Float32", [1, ANCHORS, 1]),
+    ];
+    for (kind, outlets, want) in [
+        ("inputs", session.inputs(), &want_in[..]),
+        ("outputs", session.outputs(), &want_out[..]),
+    ] {
+        let got: Vec<String> = outlets.iter().map(describe).collect();
+        if got != want {
+            return Err(format!("its {kind} are {got:?}, not {want:?}"));
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn there_are_896_anchors_on_two_grids() {
+        let a = anchors();
+        assert_eq!(a.len(), ANCHORS);
+        // The 16 x 16 grid's first cell, twice; then the 8 x 8 grid's, six times.
+        assert_eq!(a[0], [0.5 / 16.0, 0.5 / 16.0]);
+        assert_eq!(a[1], a[0]);
+        assert_eq!(a[2], [1.5 / 16.0, 0.5 / 16.0]);
+        assert_eq!(a[512], [0.5 / 8.0, 0.5 / 8.0]);
+        assert_eq!(a[517], a[512]);
+        assert_eq!(a[518], [1.5 / 8.0, 0.5 / 8.0]);
+        assert_eq!(a[ANCHORS - 1], [7.5 / 8.0, 7.5 / 8.0]);
+    }
+
+    fn candidate(x: f32, score: f32) -> Candidate {
+        Candidate {
+            bounds: [x, 0.2, x + 0.2, 0.4],
+            keypoints: [[x + 0.1, 0.3]; 6],
+            score,
+        }
+    }
+
+    #[test]
+    fn overlapping_candidates_merge_weighted_by_score_and_apart_ones_stay() {
+        let faces = suppress(vec![
+            candidate(0.1, 0.6),
+            candidate(0.12, 0.9),
+            candidate(0.7, 0.8),
+        ]);
+        assert_eq!(faces.len(), 2);
+        // The best one's score; the box between the two, nearer the better one.
+        assert_eq!(faces[0].score, 0.9);
+        let x = (0.1 * 0.6 + 0.12 * 0.9) / 1.5;
+        assert!((faces[0].bounds[0] - x).abs() < 1e-6);
+        assert!((faces[0].keypoints[3][0] - (x + 0.1)).abs() < 1e-6);
+        assert_eq!(faces[1].bounds[0], 0.7);
+    }
+
+    #[test]
+    fn letterbox_fractions_map_back_to_frame_pixels() {
+        // A 640x360 frame's letterbox is 640 square, its corner at (0, -140).
+        let f = to_frame(&candidate(0.25, 0.9), 640.0, [0.0, -140.0]);
+        assert!((f.cx - 0.35 * 640.0).abs() < 1e-3);
+        assert!((f.cy - (0.3 * 640.0 - 140.0)).abs() < 1e-3);
+        assert!((f.width - 0.2 * 640.0).abs() < 1e-3 && (f.height - 0.2 * 640.0).abs() < 1e-3);
+    }
+}
