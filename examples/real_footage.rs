@@ -82,8 +82,9 @@ fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
     Ok(out)
 }
 
-/// The frames relit by the element with no monitor stream.
-fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<RgbImage>, String> {
+/// The frames relit by the element with no monitor stream, each with the square
+/// the element relit (its `face` region-of-interest meta; None when it relit none).
+fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
     let (w, h) = (frames[0].width as u32, frames[0].height as u32);
     let caps = rgb_caps(w, h, 30);
     let pipeline = gst::parse::launch(&format!(
@@ -117,7 +118,18 @@ fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<RgbImage>, String> 
         }
         src.push_buffer(buffer).map_err(|e| e.to_string())?;
         let sample = sink.pull_sample().map_err(|_| "the element stopped")?;
-        out.push(to_rgb(&sample.buffer_owned().expect("a buffer"), &caps));
+        let buffer = sample.buffer_owned().expect("a buffer");
+        let region = buffer
+            .meta::<gst_video::VideoRegionOfInterestMeta>()
+            .map(|roi| {
+                let (x, y, size, _) = roi.rect();
+                Region {
+                    x: x as usize,
+                    y: y as usize,
+                    size: size as usize,
+                }
+            });
+        out.push((to_rgb(&buffer, &caps), region));
     }
     let _ = src.end_of_stream();
     pipeline
@@ -126,8 +138,8 @@ fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<RgbImage>, String> 
     Ok(out)
 }
 
-/// The element's default face region: the centred square of full height.
-fn face_region(img: &RgbImage) -> Region {
+/// Where to measure a frame the element did not mark: the centred square of full height.
+fn centred_square(img: &RgbImage) -> Region {
     let size = img.width.min(img.height);
     Region {
         x: (img.width - size) / 2,
@@ -163,8 +175,14 @@ fn measure(
     out: &Path,
 ) -> Result<Measured, String> {
     let input = decode(path, frames)?;
-    let output = relight(&input, target)?;
-    let region = face_region(&input[0]);
+    let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
+        relight(&input, target)?.into_iter().unzip();
+    // The face measures look at the square the element relit.
+    let regions: Vec<Region> = regions
+        .into_iter()
+        .zip(&input)
+        .map(|(r, img)| r.unwrap_or_else(|| centred_square(img)))
+        .collect();
     let edges: Vec<f64> = input
         .iter()
         .zip(&output)
@@ -173,12 +191,14 @@ fn measure(
     let mottled: Vec<f64> = input
         .iter()
         .zip(&output)
-        .map(|(i, o)| mottling(i, o, region))
+        .zip(&regions)
+        .map(|((i, o), &r)| mottling(i, o, r))
         .collect();
     let means: Vec<(f64, f64)> = input
         .iter()
         .zip(&output)
-        .map(|(i, o)| (mean_level(i, region), mean_level(o, region)))
+        .zip(&regions)
+        .map(|((i, o), &r)| (mean_level(i, r), mean_level(o, r)))
         .collect();
     let shown = input.len() / 2;
     let image = out.join(format!("{name}-before-after.png"));

@@ -212,6 +212,16 @@ pub struct Crop {
 }
 
 impl Crop {
+    /// Whether `other` is this square moved or resized by at most 2% of its side:
+    /// a followed face's crop from frame to frame, close enough that a lighting
+    /// change computed for one serves the other.
+    pub fn near(&self, other: Crop) -> bool {
+        let tolerance = (self.size / 50).max(1);
+        self.x.abs_diff(other.x) <= tolerance
+            && self.y.abs_diff(other.y) <= tolerance
+            && self.size.abs_diff(other.size) <= tolerance
+    }
+
     /// A square of `size_fraction` of the frame's shorter side centred at
     /// (`cx`, `cy`) in fractions of the frame, moved inside the frame and kept
     /// even so chroma planes align.
@@ -485,7 +495,12 @@ impl LightingChange {
     /// crop edge that lies inside the frame, the change fades out so the crop
     /// leaves no seam.
     pub fn apply(&self, frame: &mut FrameMut, crop: Crop, feather: usize) {
-        let fade = Fade::new(crop, frame.width, frame.height, feather);
+        self.apply_faded(frame, crop, feather, 1.0);
+    }
+
+    /// [`LightingChange::apply`], shown at `strength` in [0, 1] (a face fading in or out).
+    pub fn apply_faded(&self, frame: &mut FrameMut, crop: Crop, feather: usize, strength: f32) {
+        let fade = Fade::new(crop, frame.width, frame.height, feather, strength);
         for pass in frame.format.passes() {
             let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
             let (area, sub) = (crop.in_plane(pass.subsample), pass.subsample);
@@ -789,15 +804,18 @@ fn round_to_u8(x: f32) -> u8 {
 struct Fade {
     crop: Crop,
     feather: f32,
+    /// How much of the change shows anywhere, in [0, 1].
+    strength: f32,
     /// Which crop edges lie inside the frame: left, right, top, bottom.
     inner: [bool; 4],
 }
 
 impl Fade {
-    fn new(crop: Crop, width: usize, height: usize, feather: usize) -> Fade {
+    fn new(crop: Crop, width: usize, height: usize, feather: usize, strength: f32) -> Fade {
         Fade {
             crop,
             feather: feather as f32,
+            strength: strength.clamp(0.0, 1.0),
             inner: [
                 crop.x > 0,
                 crop.x + crop.size < width,
@@ -833,7 +851,7 @@ impl Fade {
     fn weight_y(&self, y: usize) -> f32 {
         let from_top = y as f32 - self.crop.y as f32 + 0.5;
         let from_bottom = (self.crop.y + self.crop.size) as f32 - y as f32 - 0.5;
-        self.ramp(from_top, from_bottom, self.inner[2], self.inner[3])
+        self.strength * self.ramp(from_top, from_bottom, self.inner[2], self.inner[3])
     }
 }
 

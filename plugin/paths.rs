@@ -69,6 +69,10 @@ pub fn default_model() -> PathBuf {
     locate("models/default", "models/default")
 }
 
+pub fn default_face_detector() -> PathBuf {
+    locate("models/face/blazeface.onnx", "models/face/blazeface.onnx")
+}
+
 pub fn default_target() -> PathBuf {
     locate("targets/studio.png", "models/targets/studio.png")
 }

@@ -2,12 +2,13 @@
 //! mode, the predicted-monitor output, target changes and state resets.
 
 use deskstage::math::Vec3;
+use deskstage::subject::{Pose, State};
 use gst::prelude::*;
 use gst_check::Harness;
 use lsydrelight_testkit::{
     element::{element, monitor_time, stat},
     init,
-    person::{FACE_H, FACE_W, face_rgb, render_face},
+    person::{FACE_H, FACE_W, face_rgb, render_face, render_person},
     target,
     video::{
         FORMATS, FRAME, buffer, caps, frame_time, mean_abs_diff, monitor_buffer, rgb_caps, to_rgb,
@@ -443,4 +444,71 @@ fn a_slow_predicted_monitor_branch_gets_every_frame_when_not_live() {
     assert_eq!(main_frames.load(load), frames);
     assert_eq!(side_frames.load(load), frames, "monitor_src dropped frames");
     assert_eq!(stat(&e, "monitor-dropped"), 0);
+}
+
+#[test]
+fn an_off_centre_face_is_followed_and_an_empty_frame_passes() {
+    // A person sitting left of centre in a wide frame: the relit square follows the
+    // face (the ROI meta says where), and pixels far from it are left alone.
+    let (w, h) = (640u32, 360u32);
+    let left = State {
+        pose: Pose {
+            body: Vec3::new(-0.25, 0.03, 0.0),
+            ..Pose::default()
+        },
+        ..State::default()
+    };
+    let img = render_person(&left, Vec3::new(1.0, 1.0, 1.0), w, h);
+    let e = element();
+    e.set_property("target-location", target("left-key"));
+    let mut harness = Harness::with_element(&e, Some("sink"), Some("src"));
+    let c = caps(gst_video::VideoFormat::Rgb, w, h, 30);
+    harness.set_src_caps(c.clone());
+    harness
+        .push(buffer(&img, &c, frame_time(0), FRAME))
+        .unwrap();
+    let out = harness.pull().unwrap();
+    let roi = out
+        .meta::<gst_video::VideoRegionOfInterestMeta>()
+        .expect("the relit square is marked");
+    assert_eq!(roi.roi_type(), "face");
+    let (x, _, side, _) = roi.rect();
+    let centre = x + side / 2;
+    assert!(
+        centre + 40 < w / 2,
+        "the square is centred at x = {centre}, not on the person left of centre"
+    );
+    let (before, after) = (
+        to_rgb(&buffer(&img, &c, frame_time(0), FRAME), &c),
+        to_rgb(&out, &c),
+    );
+    assert!(mean_abs_diff(&before, &after) > 1.0, "the face is relit");
+    let right_edge_changed = (0..h as usize)
+        .flat_map(|y| {
+            let row = (y * w as usize + w as usize - 20) * 3;
+            row..row + 60
+        })
+        .filter(|&i| before.data[i] != after.data[i])
+        .count();
+    assert_eq!(right_edge_changed, 0, "far from the face nothing changes");
+    assert_eq!(stat(&e, "face-detections"), 1);
+
+    // Nobody in view: the frame passes untouched, with no network run.
+    let empty = deskstage::monitor::RgbImage {
+        width: w as usize,
+        height: h as usize,
+        data: vec![90; (w * h * 3) as usize],
+    };
+    let e2 = element();
+    let mut h2 = Harness::with_element(&e2, Some("sink"), Some("src"));
+    h2.set_src_caps(c.clone());
+    let input = buffer(&empty, &c, frame_time(0), FRAME);
+    h2.push(input.clone()).unwrap();
+    let out = h2.pull().unwrap();
+    assert!(
+        out.map_readable().unwrap().as_slice() == input.map_readable().unwrap().as_slice(),
+        "a frame with no face is left as it is"
+    );
+    assert_eq!(stat(&e2, "skipped-no-face"), 1);
+    assert_eq!(stat(&e2, "relit"), 0);
 }

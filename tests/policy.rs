@@ -37,6 +37,17 @@ fn run(
     source: Source,
     late: bool,
 ) -> (Action, Option<Vec<u8>>) {
+    run_faded(p, image, source, late, 1.0)
+}
+
+/// [`run`] with the face shown at `strength`.
+fn run_faded(
+    p: &mut FramePolicy,
+    image: &RgbImage,
+    source: Source,
+    late: bool,
+    strength: f32,
+) -> (Action, Option<Vec<u8>>) {
     let (w, h) = (image.width, image.height);
     let frame = Frame::packed_rgb(&image.data, w, h);
     let crop = Crop::centred(w, h, 0.5, 0.5, 1.0);
@@ -44,6 +55,7 @@ fn run(
         .process(FrameRequest {
             frame: &frame,
             crop,
+            strength,
             source,
             late,
             want_prediction: false,
@@ -62,7 +74,7 @@ fn run(
             ],
             matrix: frame.matrix,
         };
-        change.apply(&mut fm, crop, 0);
+        change.apply_faded(&mut fm, crop, 0, outcome.strength);
         out
     });
     (outcome.action, pasted)
@@ -181,5 +193,31 @@ fn the_network_runs_every_reuse_interval_frames_and_at_once_on_a_change() {
     });
     for _ in 0..3 {
         assert_eq!(run(&mut every, face, white_monitor(), false).0, relit);
+    }
+}
+
+#[test]
+fn without_a_face_the_frame_passes_and_a_fading_face_is_shown_in_part() {
+    let mut p = policy(Skips::default());
+    let face = face_rgb();
+    assert_eq!(run(&mut p, face, white_monitor(), false).0, Action::Relit);
+    let (action, change) = run_faded(&mut p, face, white_monitor(), false, 0.0);
+    assert_eq!(action, Action::PassedThrough(PassThrough::NoFace));
+    assert!(change.is_none());
+    assert_eq!(
+        p.counts().resets,
+        1,
+        "a lost face forgets the stream's state"
+    );
+    // Half faded in: every byte moves at most about half as far as when fully shown.
+    let mut full = policy(Skips::default());
+    let shown = run(&mut full, face, white_monitor(), false).1.unwrap();
+    let mut half = policy(Skips::default());
+    let halfway = run_faded(&mut half, face, white_monitor(), false, 0.5)
+        .1
+        .unwrap();
+    for ((s, h), i) in shown.iter().zip(&halfway).zip(&face.data) {
+        let (full_step, half_step) = (*s as f32 - *i as f32, *h as f32 - *i as f32);
+        assert!((half_step - full_step / 2.0).abs() <= 1.0);
     }
 }

@@ -4,8 +4,8 @@
 //! Given a frame, its face region, its source light and whether it is already
 //! late, [`FramePolicy::process`] decides and carries out one of:
 //!
-//! - **pass through**, untouched: the region is too dark to carry light to change
-//!   (black frames stay black), nobody is in view, the source light already is the
+//! - **pass through**, untouched: no face is followed, the region is too dark to
+//!   carry light to change (black frames stay black), nobody is in view, the source light already is the
 //!   target, or the network broke (NaN/Inf);
 //! - **reuse** the last relighting, carried onto this frame: the frame is late
 //!   (QoS), or the network ran less than `reuse-interval` frames ago and neither
@@ -87,6 +87,9 @@ pub struct FrameRequest<'a> {
     pub frame: &'a Frame<'a>,
     /// The face region.
     pub crop: Crop,
+    /// How much of the relighting to show, in [0, 1]: a followed face fading in or
+    /// out; 0 when no face is followed.
+    pub strength: f32,
     pub source: Source,
     /// Already past its deadline: reuse the last relighting if there is one.
     pub late: bool,
@@ -105,6 +108,8 @@ pub enum Reuse {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PassThrough {
+    /// No face is followed.
+    NoFace,
     /// The face region is too dark to carry light ([`DARK_LEVEL`]).
     Dark,
     /// The presence stage sees nobody.
@@ -128,6 +133,8 @@ pub struct Outcome<'a> {
     pub action: Action,
     /// The lighting change to paste onto the frame's face region; None leaves it as it is.
     pub change: Option<&'a LightingChange>,
+    /// How much of the change to show, in [0, 1].
+    pub strength: f32,
     /// The predicted source monitor light, when there is one for this frame.
     pub predicted: Option<Light>,
     /// What the decision was based on, for the debug log.
@@ -149,6 +156,9 @@ impl fmt::Display for Outcome<'_> {
                 "carried the last relighting: the network ran recently and little changed since (change {:.4})",
                 self.change_since_network
             ),
+            Action::PassedThrough(PassThrough::NoFace) => {
+                write!(f, "passed through: no face is followed")
+            }
             Action::PassedThrough(PassThrough::Dark) => write!(
                 f,
                 "passed through: the face region is dark (mean luma {:.3} < {DARK_LEVEL})",
@@ -186,6 +196,7 @@ pub struct FrameOutput {
 pub struct PolicyCounts {
     pub relit: u64,
     pub reused_interval: u64,
+    pub passed_no_face: u64,
     pub reused_late: u64,
     pub passed_dark: u64,
     pub passed_absent: u64,
@@ -325,10 +336,25 @@ impl FramePolicy {
         let FrameRequest {
             frame,
             crop,
+            strength,
             source,
             late,
             want_prediction,
         } = request;
+        if strength <= 0.0 {
+            // Nobody to relight; by the time a face is back, nothing from before applies.
+            self.counts.passed_no_face += 1;
+            self.reset();
+            return Ok(Outcome {
+                action: Action::PassedThrough(PassThrough::NoFace),
+                change: None,
+                strength,
+                predicted: None,
+                luma: 0.0,
+                presence: None,
+                change_since_network: 0.0,
+            });
+        }
         let res = self.relighter.resolution();
         let image = timed(&mut self.counts.crop_seconds, || {
             sample_crop(frame, crop, res)
@@ -337,6 +363,7 @@ impl FramePolicy {
         let passed = |action, presence| Outcome {
             action: Action::PassedThrough(action),
             change: None,
+            strength,
             predicted: None,
             luma,
             presence,
@@ -376,7 +403,7 @@ impl FramePolicy {
                 ..passed(PassThrough::SameLight, presence)
             });
         }
-        let last = self.last.as_ref().filter(|last| last.crop == crop);
+        let last = self.last.as_ref().filter(|last| last.crop.near(crop));
         let change_since_network = last.map_or(f32::INFINITY, |l| mean_abs_diff(&image, &l.image));
         let reuse = last.and_then(|last| {
             if late {
@@ -411,6 +438,7 @@ impl FramePolicy {
             return Ok(Outcome {
                 action: Action::Reused(why),
                 change: Some(self.carried.insert(carried)),
+                strength,
                 predicted: last.predicted.clone(),
                 luma,
                 presence,
@@ -438,6 +466,7 @@ impl FramePolicy {
         Ok(Outcome {
             action: Action::Relit,
             change: Some(&last.change),
+            strength,
             predicted: out.predicted,
             luma,
             presence,

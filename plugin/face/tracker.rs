@@ -156,8 +156,9 @@ impl FaceTracker {
             Some(last) if time > last => (time - last) as f32,
             _ => DEFAULT_DT,
         };
+        let first_frame = self.last_time.is_none();
         self.last_time = Some(time);
-        self.step_fade();
+        self.step_fade(first_frame);
         if self.fade == 0.0
             && let Some(face) = self.pending.take()
         {
@@ -223,14 +224,19 @@ impl FaceTracker {
     }
 
     /// Moves the fade weight one frame towards 1 while a face is followed and not
-    /// lost beyond the hold, else towards 0.
-    fn step_fade(&mut self) {
+    /// lost beyond the hold, else towards 0. A stream's first frame has nothing to
+    /// pop from: a face there is shown at once.
+    fn step_fade(&mut self, first_frame: bool) {
         let shown = self.followed.is_some()
             && self
                 .missing_for
                 .is_none_or(|m| m < self.settings.hold_frames);
         let target = if shown { 1.0 } else { 0.0 };
-        let step = 1.0 / self.settings.fade_frames.max(1) as f32;
+        let step = if first_frame {
+            1.0
+        } else {
+            1.0 / self.settings.fade_frames.max(1) as f32
+        };
         self.fade = if target > self.fade {
             (self.fade + step).min(target)
         } else {
@@ -411,24 +417,33 @@ mod tests {
             ..TrackerSettings::default()
         };
         let mut t = FaceTracker::new(s);
-        let out = run(&mut t, 0..40, |i| {
-            if i < 20 {
+        // Nobody for 3 frames, a face for 20, nobody again.
+        let out = run(&mut t, 0..43, |i| {
+            if (3..23).contains(&i) {
                 vec![face(160.0, 100.0, 50.0)]
             } else {
                 vec![]
             }
         });
         let fades: Vec<f32> = out.iter().map(|o| o.fade).collect();
-        // In over fade_frames, from the first frame.
+        assert!(fades[..3].iter().all(|&f| f == 0.0), "{fades:?}");
+        // In over fade_frames, from the face's first frame.
         let step = 1.0 / s.fade_frames as f32;
         for i in 0..s.fade_frames as usize {
-            assert!((fades[i] - step * (i + 1) as f32).abs() < 1e-5, "{fades:?}");
+            assert!(
+                (fades[3 + i] - step * (i + 1) as f32).abs() < 1e-5,
+                "{fades:?}"
+            );
         }
         // Held, then out over fade_frames; the crop stays where the face was.
-        let gone = 20 + s.hold_frames as usize;
-        assert!(fades[20..gone].iter().all(|&f| f == 1.0), "{fades:?}");
+        let gone = 23 + s.hold_frames as usize;
+        assert!(fades[23..gone].iter().all(|&f| f == 1.0), "{fades:?}");
         assert!(fades[gone] < 1.0 && fades[gone + s.fade_frames as usize - 1] == 0.0);
-        assert_eq!(out[39].square, out[19].square);
+        assert_eq!(out[42].square, out[22].square);
+        // A stream that starts on a face shows it at once: nothing to pop from.
+        let mut fresh = FaceTracker::new(s);
+        let first = run(&mut fresh, 0..1, |_| vec![face(160.0, 100.0, 50.0)]);
+        assert_eq!(first[0].fade, 1.0);
     }
 
     #[test]

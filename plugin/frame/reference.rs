@@ -109,7 +109,7 @@ pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
 
 pub fn apply(change: &LightingChange, frame: &mut FrameMut, crop: Crop, feather: usize) {
     let (fw, fh) = (frame.width, frame.height);
-    let fade = Fade::new(crop, fw, fh, feather);
+    let fade = Fade::new(crop, fw, fh, feather, 1.0);
     let (x, y, size) = (crop.x, crop.y, crop.size);
     match packed(frame.format) {
         Some((offsets, bpp)) => {

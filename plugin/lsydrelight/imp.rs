@@ -20,6 +20,7 @@ use gst_base::subclass::prelude::*;
 use super::ExecutionProvider;
 use super::monitor::{Decision, Fallback, MonitorTrack, Reading, Transition};
 use super::qos::{self, Qos};
+use super::region::FaceRegion;
 use super::settings::{self, Settings};
 use super::side_stream::{self, Queued, SideStream};
 use super::stats::Stats;
@@ -31,7 +32,6 @@ use super::video::{
 use crate::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Source,
 };
-use crate::frame::Crop;
 use crate::light::Light;
 
 pub static CAT: LazyLock<gst::DebugCategory> = LazyLock::new(|| {
@@ -52,6 +52,7 @@ const MONITOR_WATCH_PERIOD: gst::ClockTime = gst::ClockTime::from_mseconds(200);
 /// The face stream's state while the element runs.
 struct State {
     policy: FramePolicy,
+    region: FaceRegion,
     face_info: Option<gst_video::VideoInfo>,
     last_face_rt: Option<gst::ClockTime>,
     /// The target generation the policy has.
@@ -78,6 +79,16 @@ pub struct LsydRelight {
     /// A warning about dropped `monitor_src` frames was posted (once per run).
     side_drop_warned: AtomicBool,
     monitor_watch: Mutex<Option<gst::PeriodicClockId>>,
+}
+
+impl State {
+    /// Forgets the stream's past: temporal state, the followed face, the last
+    /// frame's time. Returns whether there was temporal state to forget.
+    fn reset(&mut self) -> bool {
+        self.region.reset();
+        self.last_face_rt = None;
+        self.policy.reset()
+    }
 }
 
 fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
@@ -126,8 +137,7 @@ impl LsydRelight {
     /// and new segments. The monitor frame on screen stays: it is still on screen.
     fn reset_state(&self, why: &str) {
         if let Some(state) = lock(&self.state).as_mut() {
-            state.policy.reset();
-            state.last_face_rt = None;
+            state.reset();
         }
         gst::debug!(CAT, imp = self, "reset temporal state: {why}");
     }
@@ -234,7 +244,7 @@ impl LsydRelight {
             _ => false,
         };
         let discont = buffer.flags().contains(gst::BufferFlags::DISCONT);
-        if (discont || gap) && state.policy.reset() {
+        if (discont || gap) && state.reset() {
             gst::debug!(
                 CAT,
                 imp = self,
@@ -297,29 +307,41 @@ impl LsydRelight {
             .clone()
             .ok_or(gst::FlowError::NotNegotiated)?;
         self.update_state(state, &buffer, settings);
-        let crop = Crop::centred(
-            info.width() as usize,
-            info.height() as usize,
-            settings.crop.x,
-            settings.crop.y,
-            settings.crop.size,
-        );
         let want_prediction = self.monitor_src.is_linked();
-        let outcome = {
+        let time = running_time(&self.face_pad, buffer.pts()).map_or(0.0, |t| t.seconds_f64());
+        let (region, outcome) = {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
-            state
+            let region = state
+                .region
+                .locate(&view, time, settings)
+                .map_err(|e| self.engine_failed(e))?;
+            if let Some(face) = region.detected {
+                gst::debug!(
+                    CAT,
+                    imp = self,
+                    "face at ({:.0}, {:.0}), {:.0} px high, score {:.2}",
+                    face.cx,
+                    face.cy,
+                    face.height,
+                    face.score
+                );
+            }
+            let outcome = state
                 .policy
                 .process(FrameRequest {
                     frame: &view,
-                    crop,
+                    crop: region.crop,
+                    strength: region.strength,
                     source,
                     late,
                     want_prediction,
                 })
-                .map_err(|e| self.engine_failed(e))?
+                .map_err(|e| self.engine_failed(e))?;
+            (region, outcome)
         };
+        let crop = region.crop;
         gst::debug!(
             CAT,
             imp = self,
@@ -332,11 +354,14 @@ impl LsydRelight {
                 gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
                     .map_err(|_| gst::FlowError::Error)?;
             let feather = (settings.feather * crop.size as f64).round() as usize;
-            with_frame_mut(&mut frame, |fm| change.apply(fm, crop, feather))
-                .ok_or(gst::FlowError::NotNegotiated)?;
+            with_frame_mut(&mut frame, |fm| {
+                change.apply_faded(fm, crop, feather, outcome.strength)
+            })
+            .ok_or(gst::FlowError::NotNegotiated)?;
             let paste_seconds = pasting.elapsed().as_secs_f64();
             self.count(|st| st.paste_seconds += paste_seconds);
         }
+        let outcome_shows_face = outcome.change.is_some();
         let predicted = outcome.predicted;
         let warn_nan = match outcome.action {
             Action::PassedThrough(PassThrough::NonFinite) => {
@@ -349,7 +374,21 @@ impl LsydRelight {
             _ => false,
         };
         let policy_counts = state.policy.counts();
+        let follow_counts = state.region.counts();
         drop(guard);
+        if outcome_shows_face {
+            // Downstream (and the measures) can see which square was relit.
+            gst_video::VideoRegionOfInterestMeta::add(
+                buffer.make_mut(),
+                "face",
+                (
+                    crop.x as u32,
+                    crop.y as u32,
+                    crop.size as u32,
+                    crop.size as u32,
+                ),
+            );
+        }
         if warn_nan {
             gst::element_imp_warning!(
                 self,
@@ -362,6 +401,8 @@ impl LsydRelight {
         self.count(|st| {
             st.processing_seconds += processing_seconds;
             st.policy = policy_counts;
+            st.face_detections = follow_counts.detections;
+            st.face_seconds = follow_counts.seconds;
         });
         if want_prediction {
             self.show_prediction(predicted.as_ref(), &buffer);
@@ -484,7 +525,12 @@ impl LsydRelight {
         }
     }
 
-    fn start_engine(&self, settings: &Settings) -> Result<FramePolicy, gst::ErrorMessage> {
+    /// The policy with the model's network, and the face region (with the face
+    /// detector when the face is followed).
+    fn start_engine(
+        &self,
+        settings: &Settings,
+    ) -> Result<(FramePolicy, FaceRegion), gst::ErrorMessage> {
         let env = engine::environment(&settings.ort_library)
             .map_err(|e| gst::error_msg!(gst::LibraryError::Init, ["{}", e]))?;
         let provider = match settings.provider {
@@ -515,11 +561,17 @@ impl LsydRelight {
             relighter.resolution(),
             settings.ort_library.display()
         );
-        Ok(FramePolicy::new(
-            relighter,
-            settings.temporal,
-            settings.skips,
-        ))
+        let region = FaceRegion::new(env, settings).map_err(|e| {
+            gst::error_msg!(
+                gst::ResourceError::OpenRead,
+                [
+                    "{}; or set face-tracking=false to relight a fixed region",
+                    e
+                ]
+            )
+        })?;
+        let policy = FramePolicy::new(relighter, settings.temporal, settings.skips);
+        Ok((policy, region))
     }
 }
 
@@ -724,7 +776,7 @@ impl ElementImpl for LsydRelight {
 impl AggregatorImpl for LsydRelight {
     fn start(&self) -> Result<(), gst::ErrorMessage> {
         let settings = self.settings();
-        let mut policy = self.start_engine(&settings)?;
+        let (mut policy, region) = self.start_engine(&settings)?;
         let (target, target_generation) =
             lock(&self.target).start(&settings.target_location).map_err(|e| {
                 gst::error_msg!(
@@ -740,6 +792,7 @@ impl AggregatorImpl for LsydRelight {
         })?;
         *lock(&self.state) = Some(State {
             policy,
+            region,
             face_info: None,
             last_face_rt: None,
             target_generation,

@@ -52,6 +52,7 @@ use gst::prelude::*;
 mod imp;
 mod monitor;
 mod qos;
+mod region;
 mod settings;
 mod side_stream;
 mod stats;

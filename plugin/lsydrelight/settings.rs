@@ -41,6 +41,11 @@ pub struct Settings {
     pub monitor_offset: i64,
     pub monitor_timeout: gst::ClockTime,
     pub temporal: Temporal,
+    /// Follow the face with the detector; otherwise `crop` fixes the region.
+    pub face_tracking: bool,
+    pub face_detector_location: PathBuf,
+    /// Which face to follow: 0 the largest, 1 the next, ...
+    pub face_index: u32,
     pub crop: CropRegion,
     /// Fade width at the face region's inner edges, as a fraction of the region.
     pub feather: f64,
@@ -60,6 +65,9 @@ impl Default for Settings {
             monitor_offset: 0,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
             temporal: Temporal::default(),
+            face_tracking: true,
+            face_detector_location: paths::default_face_detector(),
+            face_index: 0,
             crop: CropRegion {
                 x: DEFAULT_CROP_CENTRE,
                 y: DEFAULT_CROP_CENTRE,
@@ -102,6 +110,9 @@ impl Settings {
                 self.temporal.average_frames = v.get::<u32>().expect(checked) as usize
             }
             "prediction-weight" => self.temporal.prediction_weight = v.get().expect(checked),
+            "face-tracking" => self.face_tracking = v.get().expect(checked),
+            "face-detector-location" => self.face_detector_location = path_of(v),
+            "face-index" => self.face_index = v.get().expect(checked),
             "crop-x" => self.crop.x = v.get().expect(checked),
             "crop-y" => self.crop.y = v.get().expect(checked),
             "crop-size" => self.crop.size = v.get().expect(checked),
@@ -140,6 +151,9 @@ impl Settings {
             "beta" => self.temporal.beta.to_value(),
             "average-frames" => (self.temporal.average_frames as u32).to_value(),
             "prediction-weight" => self.temporal.prediction_weight.to_value(),
+            "face-tracking" => self.face_tracking.to_value(),
+            "face-detector-location" => path_value(&self.face_detector_location),
+            "face-index" => self.face_index.to_value(),
             "crop-x" => self.crop.x.to_value(),
             "crop-y" => self.crop.y.to_value(),
             "crop-size" => self.crop.size.to_value(),
@@ -241,9 +255,28 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .default_value(d.temporal.prediction_weight)
                 .mutable_playing()
                 .build(),
+            glib::ParamSpecBoolean::builder("face-tracking")
+                .nick("Follow the face")
+                .blurb("Find the face with the face detector and relight the square around it, fading in and out as a face comes and goes; false fixes the region with crop-x, crop-y and crop-size")
+                .default_value(d.face_tracking)
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecString::builder("face-detector-location")
+                .nick("Face detector")
+                .blurb("The face detector's ONNX file (BlazeFace short-range); the shipped one is models/face/blazeface.onnx")
+                .default_value(Some(path(&d.face_detector_location).as_str()))
+                .mutable_ready()
+                .build(),
+            glib::ParamSpecUInt::builder("face-index")
+                .nick("Which face")
+                .blurb("With several faces in view, which to follow: 0 the largest, 1 the next largest, and so on")
+                .maximum(15)
+                .default_value(d.face_index)
+                .mutable_ready()
+                .build(),
             glib::ParamSpecDouble::builder("crop-x")
                 .nick("Face region centre x")
-                .blurb("Horizontal centre of the square face region, as a fraction of the frame width")
+                .blurb("With face-tracking=false: horizontal centre of the square face region, as a fraction of the frame width")
                 .minimum(0.0)
                 .maximum(1.0)
                 .default_value(DEFAULT_CROP_CENTRE)
@@ -251,7 +284,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecDouble::builder("crop-y")
                 .nick("Face region centre y")
-                .blurb("Vertical centre of the square face region, as a fraction of the frame height")
+                .blurb("With face-tracking=false: vertical centre of the square face region, as a fraction of the frame height")
                 .minimum(0.0)
                 .maximum(1.0)
                 .default_value(DEFAULT_CROP_CENTRE)
@@ -259,7 +292,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecDouble::builder("crop-size")
                 .nick("Face region size")
-                .blurb("Side of the square face region as a fraction of the frame's shorter side (1: a head-and-shoulders square of full height)")
+                .blurb("With face-tracking=false: side of the square face region as a fraction of the frame's shorter side (1: a head-and-shoulders square of full height)")
                 .minimum(0.05)
                 .maximum(1.0)
                 .default_value(DEFAULT_CROP_SIZE)

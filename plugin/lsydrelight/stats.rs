@@ -21,6 +21,9 @@ pub struct Stats {
     pub monitor_decoded: u64,
     pub monitor_out: u64,
     pub monitor_dropped: u64,
+    /// Face detector runs, and seconds following the face (detector and tracker).
+    pub face_detections: u64,
+    pub face_seconds: f64,
     /// The policy's counts as of the last frame; kept after stop, so the last
     /// run's figures stay readable.
     pub policy: PolicyCounts,
@@ -34,6 +37,9 @@ impl Stats {
             .field("relit", p.relit)
             .field("passed-through", p.passed_non_finite)
             .field("skipped-dark", p.passed_dark)
+            .field("skipped-no-face", p.passed_no_face)
+            .field("face-detections", self.face_detections)
+            .field("face-seconds", self.face_seconds)
             .field("skipped-absent", p.passed_absent)
             .field("skipped-same-light", p.passed_same_light)
             .field("reused-interval", p.reused_interval)
