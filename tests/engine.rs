@@ -220,7 +220,7 @@ fn models_that_break_the_contract_are_refused_with_a_reason() {
     }
 
     let d = case("version");
-    edit_manifest(&d, |m| m["version"] = 2.into());
+    edit_manifest(&d, |m| m["version"] = 3.into());
     let e = load(&d).err().expect("a newer contract version is refused");
     assert!(e.to_string().contains("version 2"), "{e}");
 

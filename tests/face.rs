@@ -21,8 +21,8 @@ use deskstage::render::VERTICAL_FOV_DEG;
 use deskstage::subject::{Pose, State, Subject};
 use gstlsydrelight::engine::environment;
 use gstlsydrelight::face::{
-    CROP_LIFT, CROP_SIDE, FaceBox, FaceDetector, FaceTracker, Square, Tracked, TrackerSettings,
-    crop_from_face,
+    CROP_LIFT, CROP_SIDE, CropRule, FaceBox, FaceDetector, FaceTracker, Square, Tracked,
+    TrackerSettings, crop_from_face,
 };
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::paths::default_ort_library;
@@ -383,7 +383,11 @@ fn a_still_face_gets_a_still_crop() {
     // The detector alone, its crop on every frame.
     let raw: Vec<Square> = settled
         .iter()
-        .filter_map(|f| f.faces.first().map(crop_from_face))
+        .filter_map(|f| {
+            f.faces
+                .first()
+                .map(|face| crop_from_face(face, CropRule::TRAINING))
+        })
         .collect();
     let raw_jitter =
         sd(raw.iter().map(|s| s.cx).collect()).hypot(sd(raw.iter().map(|s| s.cy).collect()));
@@ -422,7 +426,7 @@ fn a_wandering_face_is_followed_and_faded_out_and_in() {
             && t.fade == 1.0
             && let Some(face) = faces.first()
         {
-            let want = crop_from_face(face).clamped(w, h);
+            let want = crop_from_face(face, CropRule::TRAINING).clamped(w, h);
             errors.push((
                 (t.square.cx - want.cx).hypot(t.square.cy - want.cy),
                 want.side,

@@ -13,7 +13,8 @@ use serde::Deserialize;
 use crate::light::{LIGHT_COLS, LIGHT_ROWS};
 
 pub const CONTRACT_NAME: &str = "lsydrelight-model";
-pub const CONTRACT_VERSION: u32 = 1;
+/// 2: the manifest states the crop rule the network was trained with (`crop`).
+pub const CONTRACT_VERSION: u32 = 2;
 pub const CODE_DIM: usize = 256;
 /// The stages every model has, in the order a frame runs them.
 pub const STAGES: [&str; 5] = [
@@ -61,6 +62,15 @@ pub struct LightSpec {
     pub cols: usize,
 }
 
+/// The square the network sees, derived from the face detector's box: `side`
+/// face heights square, its centre `lift` face heights above the box's centre.
+/// The trainer's crops and the element's follow the same rule.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+pub struct CropSpec {
+    pub side: f32,
+    pub lift: f32,
+}
+
 /// A model's `model.json`.
 #[derive(Clone, Debug, Deserialize)]
 pub struct Manifest {
@@ -75,6 +85,7 @@ pub struct Manifest {
     pub image: ImageSpec,
     pub light: LightSpec,
     pub smoothed: Vec<String>,
+    pub crop: CropSpec,
     pub stages: BTreeMap<String, StageSpec>,
     #[serde(default)]
     pub metrics: serde_json::Value,
@@ -184,6 +195,12 @@ impl Manifest {
         }
         if self.smoothed != SMOOTHED {
             return Err(mismatch(format!("smoothed features must be {SMOOTHED:?}")));
+        }
+        if !(self.crop.side > 0.0 && self.crop.side.is_finite() && self.crop.lift.is_finite()) {
+            return Err(mismatch(format!(
+                "crop side {} and lift {} must be finite, the side positive",
+                self.crop.side, self.crop.lift
+            )));
         }
         if self.widths.len() != 5 {
             return Err(mismatch("widths must list five channel counts"));

@@ -8,7 +8,7 @@ pub mod relighter;
 pub mod runtime;
 pub mod temporal;
 
-pub use contract::{ContractError, Manifest};
+pub use contract::{ContractError, CropSpec, Manifest};
 pub use policy::{
     Action, FrameOutput, FramePolicy, FrameRequest, Outcome, PassThrough, PolicyCounts, Reuse,
     Skips, Source,

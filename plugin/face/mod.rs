@@ -108,13 +108,35 @@ pub const CROP_SIDE: f32 = 2.9;
 /// the captures hold the face a little below the middle, the hair above it.
 pub const CROP_LIFT: f32 = 0.22;
 
-/// The crop for a face: [`CROP_SIDE`] face heights square, its centre
-/// [`CROP_LIFT`] face heights above the face's. Not clamped to the frame.
-pub fn crop_from_face(face: &FaceBox) -> Square {
+/// The rule from a face box to the network's square: `side` face heights square,
+/// its centre `lift` face heights above the face's. A model states its own
+/// (`crop` in `model.json`, the model contract); [`CropRule::TRAINING`] is the
+/// one measured on the training captures.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CropRule {
+    pub side: f32,
+    pub lift: f32,
+}
+
+impl CropRule {
+    pub const TRAINING: CropRule = CropRule {
+        side: CROP_SIDE,
+        lift: CROP_LIFT,
+    };
+}
+
+impl Default for CropRule {
+    fn default() -> Self {
+        CropRule::TRAINING
+    }
+}
+
+/// The crop for a face by `rule`. Not clamped to the frame.
+pub fn crop_from_face(face: &FaceBox, rule: CropRule) -> Square {
     Square {
         cx: face.cx,
-        cy: face.cy - CROP_LIFT * face.height,
-        side: CROP_SIDE * face.height,
+        cy: face.cy - rule.lift * face.height,
+        side: rule.side * face.height,
     }
 }
 
@@ -231,7 +253,7 @@ mod tests {
 
     #[test]
     fn the_crop_is_above_the_face_and_larger() {
-        let s = crop_from_face(&face(200.0, 100.0, 60.0));
+        let s = crop_from_face(&face(200.0, 100.0, 60.0), CropRule::TRAINING);
         assert_eq!(s.cx, 200.0);
         assert!((s.cy - (100.0 - CROP_LIFT * 60.0)).abs() < 1e-4);
         assert!((s.side - CROP_SIDE * 60.0).abs() < 1e-4);

@@ -29,7 +29,7 @@
 
 use std::f32::consts::PI;
 
-use super::{FaceBox, Square, crop_from_face, sample_square};
+use super::{CropRule, FaceBox, Square, crop_from_face, sample_square};
 use crate::frame::Frame;
 
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +48,8 @@ pub struct TrackerSettings {
     pub min_cutoff: f32,
     /// One Euro filter: how fast the cutoff rises (Hz) per crop side a second of speed.
     pub beta: f32,
+    /// From the face box to the square: the model's.
+    pub crop: CropRule,
 }
 
 impl Default for TrackerSettings {
@@ -60,6 +62,7 @@ impl Default for TrackerSettings {
             fade_frames: 8,
             min_cutoff: 0.5,
             beta: 8.0,
+            crop: CropRule::TRAINING,
         }
     }
 }
@@ -165,7 +168,11 @@ impl FaceTracker {
             self.follow(face);
         }
         if let (Some(face), Some(filter)) = (self.followed, &mut self.filter) {
-            filter.update(crop_from_face(&face), dt, &self.settings);
+            filter.update(
+                crop_from_face(&face, self.settings.crop),
+                dt,
+                &self.settings,
+            );
         }
         let square = self
             .filter
@@ -220,7 +227,7 @@ impl FaceTracker {
         self.followed = Some(face);
         self.missing_for = None;
         self.pending = None;
-        self.filter = Some(SquareFilter::new(crop_from_face(&face)));
+        self.filter = Some(SquareFilter::new(crop_from_face(&face, self.settings.crop)));
     }
 
     /// Moves the fade weight one frame towards 1 while a face is followed and not

@@ -561,7 +561,7 @@ impl LsydRelight {
             relighter.resolution(),
             settings.ort_library.display()
         );
-        let region = FaceRegion::new(env, settings).map_err(|e| {
+        let region = FaceRegion::new(env, settings, relighter.manifest().crop).map_err(|e| {
             gst::error_msg!(
                 gst::ResourceError::OpenRead,
                 [

@@ -5,8 +5,9 @@
 
 use std::time::Instant;
 
+use crate::engine::CropSpec;
 use crate::engine::EngineError;
-use crate::face::{DetectorError, FaceBox, FaceDetector, FaceTracker, TrackerSettings};
+use crate::face::{CropRule, DetectorError, FaceBox, FaceDetector, FaceTracker, TrackerSettings};
 use crate::frame::{Crop, Frame};
 
 use super::settings::Settings;
@@ -35,13 +36,18 @@ pub struct FaceRegion {
 }
 
 impl FaceRegion {
-    /// Loads the detector when the face is to be followed.
+    /// Loads the detector when the face is to be followed; `crop` is the model's rule.
     pub fn new(
         env: &ort::environment::Environment,
         settings: &Settings,
+        crop: CropSpec,
     ) -> Result<FaceRegion, DetectorError> {
         let tracker_settings = TrackerSettings {
             face_index: settings.face_index as usize,
+            crop: CropRule {
+                side: crop.side,
+                lift: crop.lift,
+            },
             ..TrackerSettings::default()
         };
         let follower = if settings.face_tracking {

@@ -28,11 +28,18 @@ import numpy as np
 import onnxruntime as ort
 
 NAME = "lsydrelight-model"
-VERSION = 1
+# 2: the manifest states the crop rule (`crop`).
+VERSION = 2
 CODE_DIM = 256
 LIGHT_ROWS = 16
 LIGHT_COLS = 32
 SMOOTHED = [f"f{i}" for i in range(1, 8)]
+# The square the network sees, from the face detector's box (BlazeFace): CROP["side"]
+# face heights square, its centre CROP["lift"] face heights above the box's centre.
+# Measured so that it gives the simulator's capture framing
+# (tests/face.rs::the_crop_rule_gives_the_training_framing); the element follows
+# the face by the rule its model states.
+CROP = {"side": 2.9, "lift": 0.22}
 RAW = [f"e{i}" for i in range(1, 8)]
 STAGES = ("light_encoder", "encoder", "light_decoder", "delight", "decoder")
 # The encoder features the light decoder predicts the source light from.
@@ -43,7 +50,7 @@ IMAGE = {
     "dtype": "float32",
     "colour": "sRGB",
     "range": [0.0, 1.0],
-    "crop": "square; the element's face region, area-resampled to the resolution",
+    "crop": "square; the face region given by `crop`, area-resampled to the resolution",
 }
 LIGHT = {
     "layout": "NCHW",
@@ -129,6 +136,7 @@ def manifest(
         "image": IMAGE,
         "light": LIGHT,
         "smoothed": SMOOTHED,
+        "crop": CROP,
         "stages": stage_specs(resolution, widths),
         "training": training,
         "metrics": metrics,
@@ -143,6 +151,8 @@ def read(path: Path) -> dict:
     m = json.loads(path.read_text())
     if m.get("contract") != NAME or m.get("version") != VERSION:
         raise ValueError(f"{path}: not a {NAME} version {VERSION} manifest")
+    if not isinstance(m.get("crop"), dict) or m["crop"].get("side", 0) <= 0:
+        raise ValueError(f"{path}: the manifest states no crop rule")
     return m
 
 
