@@ -1,6 +1,6 @@
 //! Times the crop (`sample_crop`) and the paste (`LightingChange::apply`) on
 //! synthetic frames, without GStreamer, as the element runs them: the default
-//! full-height crop, the 96 px network and a feather of 6% of the crop.
+//! full-height crop, the 96 px network and a feather of 25% of the crop.
 //!
 //! ```text
 //! cargo run --release --example paste_speed -- [--rounds 41]
@@ -14,7 +14,7 @@
 use std::time::Instant;
 
 use gstlsydrelight::frame::{
-    Crop, Frame, FrameMut, LightingChange, PixelFormat, Plane, YuvMatrix, sample_crop,
+    Crop, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
 };
 
 const SIZES: [(&str, usize, usize); 4] = [
@@ -27,84 +27,23 @@ const FORMATS: [PixelFormat; 3] = [PixelFormat::I420, PixelFormat::Nv12, PixelFo
 /// The default network's resolution.
 const RES: usize = 96;
 /// The element's default feather, as a fraction of the crop.
-const FEATHER: f64 = 0.06;
+const FEATHER: f64 = 0.25;
 const MATRIX: YuvMatrix = YuvMatrix::BT709_LIMITED;
 
-/// A frame's planes as (bytes, stride), filled with noise.
-struct Buffers {
-    format: PixelFormat,
-    width: usize,
-    height: usize,
-    planes: Vec<(Vec<u8>, usize)>,
-}
-
-impl Buffers {
-    fn new(format: PixelFormat, width: usize, height: usize, seed: u32) -> Buffers {
-        let (cw, ch) = (width.div_ceil(2), height.div_ceil(2));
-        let shapes = match format {
-            PixelFormat::I420 => vec![(width, height), (cw, ch), (cw, ch)],
-            PixelFormat::Nv12 => vec![(width, height), (2 * cw, ch)],
-            _ => vec![(4 * width, height)],
-        };
-        let mut state = seed | 1;
-        let planes = shapes
-            .into_iter()
-            .map(|(stride, rows)| {
-                let bytes = (0..stride * rows)
-                    .map(|_| {
-                        // xorshift32: cheap, deterministic, no dependency.
-                        state ^= state << 13;
-                        state ^= state >> 17;
-                        state ^= state << 5;
-                        (state >> 24) as u8
-                    })
-                    .collect();
-                (bytes, stride)
-            })
-            .collect();
-        Buffers {
-            format,
-            width,
-            height,
-            planes,
-        }
-    }
-
-    fn frame(&self) -> Frame<'_> {
-        let plane = |i: usize| {
-            let (data, stride) = &self.planes[i.min(self.planes.len() - 1)];
-            Plane {
-                data,
-                stride: *stride,
-            }
-        };
-        Frame {
-            format: self.format,
-            width: self.width,
-            height: self.height,
-            planes: [plane(0), plane(1), plane(2)],
-            matrix: MATRIX,
-        }
-    }
-
-    fn frame_mut(&mut self) -> FrameMut<'_> {
-        let mut planes = self.planes.iter_mut().map(|(d, s)| (d.as_mut_slice(), *s));
-        let first = planes.next().expect("a plane");
-        let second = planes.next().unwrap_or((&mut [], 0));
-        let third = planes.next().unwrap_or((&mut [], 0));
-        FrameMut {
-            format: self.format,
-            width: self.width,
-            height: self.height,
-            planes: [first, second, third],
-            matrix: MATRIX,
-        }
-    }
+/// A frame of `format` full of noise (xorshift32: cheap, deterministic, no dependency).
+fn noisy_frame(format: PixelFormat, width: usize, height: usize, seed: u32) -> OwnedFrame {
+    let mut state = seed | 1;
+    OwnedFrame::new(format, (width, height), 0, MATRIX, || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state >> 24) as u8
+    })
 }
 
 struct Case {
     name: String,
-    buffers: Buffers,
+    buffers: OwnedFrame,
     crop: Crop,
     feather: usize,
     change: LightingChange,
@@ -141,7 +80,7 @@ fn main() {
     let mut cases: Vec<Case> = Vec::new();
     for (label, width, height) in SIZES {
         for format in FORMATS {
-            let buffers = Buffers::new(format, width, height, cases.len() as u32 + 7);
+            let buffers = noisy_frame(format, width, height, cases.len() as u32 + 7);
             let crop = Crop::centred(width, height, 0.5, 0.5, 1.0);
             let input = sample_crop(&buffers.frame(), crop, RES);
             // A plausible change: darker overall, brighter towards one side.

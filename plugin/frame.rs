@@ -177,6 +177,81 @@ pub struct Frame<'a> {
     pub matrix: YuvMatrix,
 }
 
+/// A frame that owns its planes, each row `padding` bytes longer than its
+/// pixels: for code that makes frames without GStreamer (tests, benchmarks).
+pub struct OwnedFrame {
+    pub format: PixelFormat,
+    pub width: usize,
+    pub height: usize,
+    /// Each plane's bytes and stride.
+    pub planes: Vec<(Vec<u8>, usize)>,
+    pub matrix: YuvMatrix,
+}
+
+impl OwnedFrame {
+    /// A frame of `format` whose bytes, padding included, come from `fill` in order.
+    pub fn new(
+        format: PixelFormat,
+        (width, height): (usize, usize),
+        padding: usize,
+        matrix: YuvMatrix,
+        mut fill: impl FnMut() -> u8,
+    ) -> OwnedFrame {
+        let (cw, ch) = (width.div_ceil(2), height.div_ceil(2));
+        let rows = match (format.packed(), format) {
+            (Some((_, bpp)), _) => vec![(bpp * width, height)],
+            (None, PixelFormat::I420) => vec![(width, height), (cw, ch), (cw, ch)],
+            (None, PixelFormat::Nv12) => vec![(width, height), (2 * cw, ch)],
+            (None, _) => vec![(width, height); 3],
+        };
+        let planes = rows
+            .into_iter()
+            .map(|(bytes, rows)| {
+                let stride = bytes + padding;
+                ((0..stride * rows).map(|_| fill()).collect(), stride)
+            })
+            .collect();
+        OwnedFrame {
+            format,
+            width,
+            height,
+            planes,
+            matrix,
+        }
+    }
+
+    pub fn frame(&self) -> Frame<'_> {
+        let plane = |i: usize| {
+            let (data, stride) = &self.planes[i.min(self.planes.len() - 1)];
+            Plane {
+                data,
+                stride: *stride,
+            }
+        };
+        Frame {
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            planes: [plane(0), plane(1), plane(2)],
+            matrix: self.matrix,
+        }
+    }
+
+    pub fn frame_mut(&mut self) -> FrameMut<'_> {
+        let mut planes = self.planes.iter_mut().map(|(d, s)| (d.as_mut_slice(), *s));
+        let first = planes.next().expect("every format has a plane");
+        let second = planes.next().unwrap_or((&mut [], 0));
+        let third = planes.next().unwrap_or((&mut [], 0));
+        FrameMut {
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            planes: [first, second, third],
+            matrix: self.matrix,
+        }
+    }
+}
+
 impl<'a> Frame<'a> {
     /// A view of tightly packed 8-bit RGB pixels.
     pub fn packed_rgb(data: &'a [u8], width: usize, height: usize) -> Frame<'a> {

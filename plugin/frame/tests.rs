@@ -129,73 +129,16 @@ impl Noise {
     }
 }
 
-/// A frame's planes as (bytes, stride) full of noise, with rows longer than
-/// the pixels so that a wrong stride shows.
-struct Buffers {
-    format: PixelFormat,
-    width: usize,
-    height: usize,
-    planes: Vec<(Vec<u8>, usize)>,
+/// Random bytes of a frame of `format`, padding included.
+fn random_frame(format: PixelFormat, width: usize, height: usize, noise: &mut Noise) -> OwnedFrame {
+    OwnedFrame::new(format, (width, height), 5, YuvMatrix::BT709_LIMITED, || {
+        noise.byte()
+    })
 }
 
-impl Buffers {
-    fn new(format: PixelFormat, width: usize, height: usize, noise: &mut Noise) -> Buffers {
-        let (cw, ch) = (width.div_ceil(2), height.div_ceil(2));
-        let shapes = match reference::packed(format) {
-            Some((_, bpp)) => vec![(bpp * width, height)],
-            None if format == PixelFormat::I420 => vec![(width, height), (cw, ch), (cw, ch)],
-            None if format == PixelFormat::Nv12 => vec![(width, height), (2 * cw, ch)],
-            None => vec![(width, height); 3],
-        };
-        let planes = shapes
-            .into_iter()
-            .map(|(bytes, rows)| {
-                let stride = bytes + 5;
-                ((0..stride * rows).map(|_| noise.byte()).collect(), stride)
-            })
-            .collect();
-        Buffers {
-            format,
-            width,
-            height,
-            planes,
-        }
-    }
-
-    fn frame(&self) -> Frame<'_> {
-        let plane = |i: usize| {
-            let (data, stride) = &self.planes[i.min(self.planes.len() - 1)];
-            Plane {
-                data,
-                stride: *stride,
-            }
-        };
-        Frame {
-            format: self.format,
-            width: self.width,
-            height: self.height,
-            planes: [plane(0), plane(1), plane(2)],
-            matrix: YuvMatrix::BT709_LIMITED,
-        }
-    }
-
-    fn frame_mut(&mut self) -> FrameMut<'_> {
-        let mut planes = self.planes.iter_mut().map(|(d, s)| (d.as_mut_slice(), *s));
-        let first = planes.next().expect("a plane");
-        let second = planes.next().unwrap_or((&mut [], 0));
-        let third = planes.next().unwrap_or((&mut [], 0));
-        FrameMut {
-            format: self.format,
-            width: self.width,
-            height: self.height,
-            planes: [first, second, third],
-            matrix: YuvMatrix::BT709_LIMITED,
-        }
-    }
-
-    fn bytes(&self) -> Vec<u8> {
-        self.planes.iter().flat_map(|(d, _)| d.clone()).collect()
-    }
+/// Every byte of every plane, in order.
+fn bytes(frame: &OwnedFrame) -> Vec<u8> {
+    frame.planes.iter().flat_map(|(d, _)| d.clone()).collect()
 }
 
 /// Crops touching no edge, each edge and each corner, with odd and even
@@ -238,22 +181,19 @@ fn random_change(res: usize, format: PixelFormat, wild: bool, noise: &mut Noise)
 /// `buffers` and says whether they came out byte for byte the same, and how
 /// many bytes the paste changed.
 fn paste_both(
-    buffers: &Buffers,
+    buffers: &OwnedFrame,
     change: &LightingChange,
     crop: Crop,
     feather: usize,
 ) -> (bool, usize) {
-    let mut fast = Buffers {
+    let copy = || OwnedFrame {
         planes: buffers.planes.clone(),
         ..*buffers
     };
-    let mut old = Buffers {
-        planes: buffers.planes.clone(),
-        ..*buffers
-    };
+    let (mut fast, mut old) = (copy(), copy());
     change.apply(&mut fast.frame_mut(), crop, feather);
     reference::apply(change, &mut old.frame_mut(), crop, feather);
-    let (fast, old, before) = (fast.bytes(), old.bytes(), buffers.bytes());
+    let (fast, old, before) = (bytes(&fast), bytes(&old), bytes(buffers));
     let changed = fast.iter().zip(&before).filter(|(a, b)| a != b).count();
     (fast == old, changed)
 }
@@ -264,7 +204,7 @@ fn paste_matches_the_reference_byte_for_byte() {
     let (mut cases, mut changed) = (0, 0);
     for format in FORMATS {
         for (width, height) in SIZES {
-            let buffers = Buffers::new(format, width, height, &mut noise);
+            let buffers = random_frame(format, width, height, &mut noise);
             for crop in crops(width, height) {
                 // Network resolutions below and above the crop's: 40 > every
                 // crop here but the largest.
@@ -294,7 +234,7 @@ fn paste_matches_the_reference_byte_for_byte() {
 fn paste_matches_the_reference_at_full_size() {
     let mut noise = Noise(0xface);
     for format in FORMATS {
-        let buffers = Buffers::new(format, 1280, 720, &mut noise);
+        let buffers = random_frame(format, 1280, 720, &mut noise);
         let crop = Crop::centred(1280, 720, 0.5, 0.5, 1.0);
         let change = random_change(96, format, false, &mut noise);
         assert!(paste_both(&buffers, &change, crop, 43).0, "{format:?}");
@@ -307,7 +247,7 @@ fn paste_matches_the_reference_where_the_maps_are_not_finite() {
     // applies and stay as they were where the fade is zero.
     let mut noise = Noise(0xbad);
     for format in FORMATS {
-        let buffers = Buffers::new(format, 37, 29, &mut noise);
+        let buffers = random_frame(format, 37, 29, &mut noise);
         let mut change = random_change(7, format, false, &mut noise);
         change.base[0][3] = f32::NAN;
         change.base[2][20] = f32::INFINITY;
@@ -346,7 +286,7 @@ fn crop_matches_the_reference_within_rounding() {
     };
     for format in FORMATS {
         for (width, height) in SIZES {
-            let buffers = Buffers::new(format, width, height, &mut noise);
+            let buffers = random_frame(format, width, height, &mut noise);
             for crop in crops(width, height) {
                 for res in [16, 7, 40] {
                     check(&buffers.frame(), crop, res);
@@ -356,7 +296,7 @@ fn crop_matches_the_reference_within_rounding() {
         // Full size, where each output sample sums many bytes: about 8 a side
         // at 720p and 23 at 2160p.
         for (width, height) in [(1280, 720), (3840, 2160)] {
-            let buffers = Buffers::new(format, width, height, &mut noise);
+            let buffers = random_frame(format, width, height, &mut noise);
             check(
                 &buffers.frame(),
                 Crop::centred(width, height, 0.5, 0.5, 1.0),
@@ -406,7 +346,7 @@ fn layouts_match_the_reference() {
     for format in FORMATS {
         assert_eq!(format.packed(), reference::packed(format), "{format:?}");
         if format.is_yuv() {
-            let buffers = Buffers::new(format, 37, 29, &mut noise);
+            let buffers = random_frame(format, 37, 29, &mut noise);
             let frame = buffers.frame();
             for (x, y) in [(0, 0), (36, 28), (5, 8), (17, 3)] {
                 assert_eq!(
