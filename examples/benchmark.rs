@@ -1,7 +1,7 @@
 //! The element's side of the run-time against error benchmark.
 //!
 //! ```text
-//! cargo run --release --example benchmark -- [--out results/benchmark] [--quick]
+//! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
 //! cargo run --release --example benchmark -- --stages [--rounds 3] [--out results/benchmark]
 //! ```
 //!
@@ -569,8 +569,12 @@ fn main() -> Result<(), String> {
         return Ok(());
     }
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let group = flag("--group");
     let mut results = Vec::new();
-    for v in variants(&checkout(), quick) {
+    for v in variants(&checkout(), quick)
+        .into_iter()
+        .filter(|v| group.as_ref().is_none_or(|g| &v.group == g))
+    {
         eprintln!("benchmark: {} ({})", v.name, v.group);
         // A process per variant: its own peak memory and a cold start.
         let output = Command::new(&exe)

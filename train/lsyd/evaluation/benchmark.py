@@ -348,7 +348,11 @@ def pareto(rows: list[dict], path: Path) -> None:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("stage", choices=["export", "report"])
+    p.add_argument(
+        "stage",
+        choices=["export", "report", "skips"],
+        help="skips: only the skip table, from the element's run alone (`--group skip`)",
+    )
     p.add_argument("--data", type=Path, default=ROOT / "data")
     p.add_argument("--runs", type=Path, default=ROOT / "runs")
     p.add_argument("--out", type=Path, default=ROOT / "results" / "benchmark")
@@ -356,6 +360,11 @@ def main() -> None:
     a = p.parse_args()
     if a.stage == "export":
         export_all(a.data, a.runs)
+    elif a.stage == "skips":
+        element = json.loads((a.out / "element.json").read_text())
+        rows = [{**r["variant"], "recordings": r["recordings"]} for r in element]
+        (a.out / "skips.md").write_text(skip_table(rows))
+        print(skip_table(rows))
     else:
         report(a.data, a.out, a.peer_run)
 
