@@ -162,11 +162,9 @@ fn ctrl_c_stops_cleanly_and_leaves_a_playable_file() {
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(!out.exists(), "the final name appears only at the end");
-    let kill = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(kill.success());
+    // SAFETY: a signal to our own child, which has not been waited for, so its pid is still its.
+    let sent = unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) };
+    assert_eq!(sent, 0, "SIGINT sent");
     let o = child.wait_with_output().unwrap();
     assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
     assert!(partials(dir.path()).is_empty(), "renamed into place");
