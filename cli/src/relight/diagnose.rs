@@ -41,7 +41,7 @@ fn origin(src: Option<&gst::Object>) -> Origin {
 
 pub fn error(e: &gst::message::Error, files: &Files, missing_plugins: &[String]) -> Failure {
     let own = e.details().is_some_and(|d| d.name() == OWN_ERROR);
-    let text = e.error().message().to_string();
+    let text = e.error().message().trim_end_matches('.').to_string();
     let input = |flag: &str, path: &Path| {
         let problem = if own {
             text.clone()
@@ -50,11 +50,15 @@ pub fn error(e: &gst::message::Error, files: &Files, missing_plugins: &[String])
         };
         Failure::new(format!("{flag} {}: {problem}", path.display()))
     };
+    // The file sink fails for the disk; the encoder and muxer before it for the stream.
     let output = |path: &Path| {
-        Failure::new(format!(
-            "cannot write {}: {text}; check that its folder is writable and has room",
-            path.display()
-        ))
+        Failure::new(match e.error().kind::<gst::ResourceError>() {
+            Some(_) => format!(
+                "cannot write {}: {text}; check that its folder is writable and has room",
+                path.display()
+            ),
+            None => format!("{}: {text}", path.display()),
+        })
     };
     match origin(e.src()) {
         Origin::Face => input("--face", &files.face),
