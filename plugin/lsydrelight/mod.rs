@@ -16,6 +16,10 @@
 //! - `monitor_src`: the predicted source monitor light as a small RGB video at the face
 //!   frame rate; computed only while linked.
 //!
+//! The face is followed with a face detector (`face-tracking`), and the square the
+//! model's crop rule gives around it is relit; with no face the frame passes. A
+//! dark face region (black frames, fades) passes too.
+//!
 //! The source light is averaged over the last `average-frames` frames with weights
 //! `beta`^i, and the de-lit features are smoothed with `alpha` (the paper's section 3.3).
 //!
@@ -24,7 +28,7 @@
 //! Relight a recorded call (face video and screen recording) offline:
 //!
 //! ```text
-//! gst-launch-1.0 lsydrelight name=r target-location=models/targets/sunset.png \
+//! gst-launch-1.0 -e lsydrelight name=r target-location=models/targets/sunset.png \
 //!     filesrc location=face.y4m ! y4mdec ! r.sink \
 //!     filesrc location=monitor.y4m ! y4mdec ! r.monitor_sink \
 //!     r.src ! videoconvert ! x264enc ! mp4mux ! filesink location=relit.mp4
@@ -33,7 +37,7 @@
 //! A webcam with the screen it faces, live, plus the predicted monitor:
 //!
 //! ```text
-//! gst-launch-1.0 lsydrelight name=r \
+//! gst-launch-1.0 -e lsydrelight name=r \
 //!     v4l2src ! videoconvert ! r.sink \
 //!     ximagesrc use-damage=false ! video/x-raw,framerate=10/1 ! videoconvert ! r.monitor_sink \
 //!     r.src ! queue ! autovideosink \
@@ -43,7 +47,7 @@
 //! A webcam alone (the source light is predicted), to a virtual camera for OBS or calls:
 //!
 //! ```text
-//! gst-launch-1.0 v4l2src ! videoconvert ! lsydrelight ! videoconvert ! v4l2sink device=/dev/video10
+//! gst-launch-1.0 -e v4l2src ! videoconvert ! lsydrelight ! videoconvert ! v4l2sink device=/dev/video10
 //! ```
 
 use gst::glib;
