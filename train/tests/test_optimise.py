@@ -1,12 +1,16 @@
 """The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed on 4x4 blocks
-matches the original up to rounding; other convolutions are left alone."""
+matches the original up to rounding, on single convolutions and on the shipped network's
+stages with real and random inputs; other convolutions are left alone; the shipped model is
+rewritten and keeps its contract."""
 
 import numpy as np
 import onnx
 import pytest
+import torch
 from onnx import TensorProto, helper, numpy_helper
+from skimage import data as skdata
 
-from lsyd import optimise
+from lsyd import contract, data, export, optimise
 
 
 def conv_graph(cout: int, k: int, size: int, stride: int = 1, pad: int | None = None, cin: int = 16):
@@ -79,3 +83,55 @@ def test_kernel_weight_recovers_the_original_weight(k, block):
     r = -(-(k // 2) // block)
     assert wd.shape == (3 * block * block, 5 * block * block, 2 * r + 1, 2 * r + 1)
     np.testing.assert_array_equal(optimise.kernel_weight(wd, 3, k), w)
+
+
+def tensors(model: onnx.ModelProto) -> list[tuple]:
+    def spec(v):
+        t = v.type.tensor_type
+        return v.name, [d.dim_value for d in t.shape.dim], onnx.helper.tensor_dtype_to_np_dtype(t.elem_type).name
+
+    return [[spec(v) for v in model.graph.input], [spec(v) for v in model.graph.output]]
+
+
+def test_shipped_model_is_rewritten_and_keeps_its_contract(shipped_model, tmp_path):
+    m = contract.read(shipped_model / "model.json")
+    for stage in contract.STAGES:
+        spec = m["stages"][stage]
+        model = onnx.load(shipped_model / spec["file"])
+        want = [[(t["name"], t["shape"], t["dtype"]) for t in spec[k]] for k in ("inputs", "outputs")]
+        assert tensors(model) == want, stage
+        assert optimise.space_to_depth_convs(model) == [], f"{stage} has a convolution left to rewrite"
+    assert "SpaceToDepth" in {n.op_type for n in onnx.load(shipped_model / "decoder.onnx").graph.node}
+
+
+def real_frame(resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scikit-image's astronaut portrait, head and shoulders, as the element crops a face; a
+    white screen and the portrait itself shown on the screen as the source and target lights."""
+    portrait = skdata.astronaut()
+    image = data.to_tensor(data.area_resize(portrait[:320, 90:410], resolution)).numpy()[None]
+    white = contract.light_from_frames(np.full((90, 160, 3), 255, np.uint8))[None]
+    return image, white, contract.light_from_frames(portrait)[None]
+
+
+def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_model, tmp_path):
+    net = export.network_from_model(shipped_model)
+    m = contract.read(shipped_model / "model.json")
+    specs = contract.stage_specs(m["resolution"], tuple(m["widths"]))
+    image, source, target = real_frame(m["resolution"])
+    ref = export.reference_run(net, *(torch.from_numpy(x) for x in (image, source, target)))
+    export.write_stages(net, specs, tmp_path, ref, rewrite=False)
+    real = contract.StageChain(tmp_path).stage_inputs(image, source, target)
+    diffs = {}
+    for stage in contract.STAGES:
+        original = onnx.load(tmp_path / contract.stage_file(stage))
+        rewritten = copy(original)
+        if not optimise.space_to_depth_convs(rewritten):
+            continue
+        feeds = [real[stage], *optimise.random_feeds(original)]
+        diffs[stage] = optimise.max_difference(original, rewritten, feeds)
+        # The shipped stage is this rewrite of its own weights.
+        shipped = onnx.load(shipped_model / contract.stage_file(stage))
+        assert optimise.max_difference(rewritten, shipped, feeds) == 0.0, stage
+    print(f"max abs difference of the rewritten stages: {diffs}")  # shown with pytest -s
+    assert list(diffs) == ["decoder"]
+    assert max(diffs.values()) <= optimise.TOLERANCE
