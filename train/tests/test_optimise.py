@@ -1,7 +1,8 @@
 """The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed on 4x4 blocks
 matches the original up to rounding, on single convolutions and on the shipped network's
 stages with real and random inputs; other convolutions are left alone; the shipped model is
-rewritten and keeps its contract."""
+rewritten and keeps its contract; the benchmark times it with and without the rewrites beside
+PyTorch."""
 
 import numpy as np
 import onnx
@@ -11,6 +12,7 @@ from onnx import TensorProto, helper, numpy_helper
 from skimage import data as skdata
 
 from lsyd import contract, data, export, optimise
+from lsyd.evaluation import benchmark
 
 
 def conv_graph(cout: int, k: int, size: int, stride: int = 1, pad: int | None = None, cin: int = 16):
@@ -135,3 +137,12 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
     print(f"max abs difference of the rewritten stages: {diffs}")  # shown with pytest -s
     assert list(diffs) == ["decoder"]
     assert max(diffs.values()) <= optimise.TOLERANCE
+
+
+def test_network_timings_compare_the_rewrite_and_the_peer_in_one_run(shipped_model):
+    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1)
+    for name in ("onnxruntime", "onnxruntime, not rewritten", "pytorch"):
+        t = timings[name]["1"]
+        assert 0 < t["min"] <= t["median"] <= t["max"], name
+    assert timings["peer_ratio"]["1"] > 0
+    assert "| 1 |" in benchmark.network_table(timings)
