@@ -157,9 +157,9 @@ def write_stages(net: model.LcfnNet, specs: dict, out: Path, ref: dict[str, np.n
 
 def network_from_model(folder: Path) -> model.LcfnNet:
     """The PyTorch network of an exported model folder, from its stages' weights: the ONNX
-    initializers keep the parameters' names (``net.<name>``), and a convolution ``optimise``
-    rewrote keeps its weight, in the blocks' layout (``optimise.kernel_weight``). Lets the
-    benchmark time PyTorch on the very network it times in ONNX Runtime, without the run."""
+    initializers keep the parameters' names (``net.<name>``), also where ``optimise`` changed a
+    convolution's layout (``optimise.original_parameter``). Lets the benchmark time PyTorch on
+    the very network it times in ONNX Runtime, without the run."""
     m = contract.read(folder / "model.json")
     net = model.build(model.NetConfig(resolution=m["resolution"], width=m["widths"][1] / model.PAPER_WIDTHS[1]))
     params = net.state_dict()
@@ -171,8 +171,7 @@ def network_from_model(folder: Path) -> model.LcfnNet:
                 continue
             value, shape = numpy_helper.to_array(t), tuple(params[name].shape)
             if value.shape != shape:
-                # A rewritten convolution: its bias is tiled over the block's pixels.
-                value = optimise.kernel_weight(value, shape[0], shape[-1]) if value.ndim == 4 else value[: shape[0]]
+                value = optimise.original_parameter(value, shape)
             state[name] = torch.from_numpy(value.copy())
     net.load_state_dict(state)  # strict: every parameter is in the stages
     return net.eval()

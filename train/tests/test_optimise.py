@@ -1,5 +1,5 @@
-"""The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed on 4x4 blocks
-matches the original up to rounding, on single convolutions and on the shipped network's
+"""The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed by kernel
+rows matches the original up to rounding, on single convolutions and on the shipped network's
 stages with real and random inputs; other convolutions are left alone; the shipped model is
 rewritten and keeps its contract; the benchmark times it with and without the rewrites beside
 PyTorch."""
@@ -15,24 +15,26 @@ from lsyd import contract, data, export, optimise
 from lsyd.evaluation import benchmark
 
 
-def conv_graph(cout: int, k: int, size: int, stride: int = 1, pad: int | None = None, cin: int = 16):
-    """x [1,cin,size,size] -> Conv(k x k, bias) -> Clip(0, 1) -> y, with random weights."""
-    rng = np.random.default_rng(k * 100 + cout)
-    pad = k // 2 if pad is None else pad
-    w = (rng.standard_normal((cout, cin, k, k)) / np.sqrt(cin * k * k)).astype(np.float32)
+def conv_graph(cout: int, kernel: tuple[int, int], size: int, stride: int = 1, same: bool = True, cin: int = 16):
+    """x [1,cin,size,size] -> Conv(kernel, bias) -> Clip(0, 1) -> y, with random weights."""
+    kh, kw = kernel
+    rng = np.random.default_rng(kh * 100 + kw * 10 + cout)
+    pads = [kh // 2, kw // 2] * 2 if same else [0] * 4
+    w = (rng.standard_normal((cout, cin, kh, kw)) / np.sqrt(cin * kh * kw)).astype(np.float32)
     b = rng.standard_normal(cout).astype(np.float32)
     nodes = [
         helper.make_node(
-            "Conv", ["x", "w", "b"], ["h"], "conv", kernel_shape=[k, k], pads=[pad] * 4, strides=[stride] * 2
+            "Conv", ["x", "w", "b"], ["h"], "conv", kernel_shape=[kh, kw], pads=pads, strides=[stride] * 2
         ),
         helper.make_node("Clip", ["h", "lo", "hi"], ["y"], "clip"),
     ]
-    out = (size + 2 * pad - k) // stride + 1
+    out_h = (size + pads[0] + pads[2] - kh) // stride + 1
+    out_w = (size + pads[1] + pads[3] - kw) // stride + 1
     graph = helper.make_graph(
         nodes,
         "conv",
         [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, cin, size, size])],
-        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, cout, out, out])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, cout, out_h, out_w])],
         [
             numpy_helper.from_array(w, "w"),
             numpy_helper.from_array(b, "b"),
@@ -50,13 +52,14 @@ def copy(model: onnx.ModelProto) -> onnx.ModelProto:
     return out
 
 
-@pytest.mark.parametrize("cout,k,size", [(3, 7, 96), (1, 3, 16), (4, 5, 32), (2, 9, 24)])
-def test_convolution_on_blocks_matches_the_original(cout, k, size):
-    original = conv_graph(cout, k, size)
+@pytest.mark.parametrize("cout,kernel,size", [(3, (7, 7), 96), (1, (3, 3), 16), (4, (5, 3), 18), (2, (9, 9), 24)])
+def test_convolution_by_rows_matches_the_original(cout, kernel, size):
+    original = conv_graph(cout, kernel, size)
     rewritten = copy(original)
-    assert optimise.space_to_depth_convs(rewritten) == ["conv"]
-    # The clamp runs on blocks, where ONNX Runtime fuses it into the convolution.
-    assert [n.op_type for n in rewritten.graph.node] == ["SpaceToDepth", "Conv", "Clip", "DepthToSpace"]
+    assert optimise.convs_by_rows(rewritten) == ["conv"]
+    ops = [n.op_type for n in rewritten.graph.node]
+    assert ops == ["Conv"] + ["Slice"] * kernel[0] + ["Sum", "Clip"]
+    assert rewritten.graph.input == original.graph.input
     assert rewritten.graph.output == original.graph.output
     # Inputs in [0, 1) and wider, negative ones (a feature map's range), so the clamp cuts both ends.
     wide = {"x": 4 * np.random.default_rng(1).standard_normal((1, 16, size, size)).astype(np.float32)}
@@ -67,24 +70,27 @@ def test_convolution_on_blocks_matches_the_original(cout, k, size):
 @pytest.mark.parametrize(
     "why,model",
     [
-        ("strided", conv_graph(3, 3, 16, stride=2)),
-        ("one output block", conv_graph(8, 7, 96)),
-        ("the stem's 5 outputs", conv_graph(5, 7, 96, cin=3)),
-        ("map not whole blocks", conv_graph(3, 7, 18)),
-        ("not 'same' padding", conv_graph(3, 7, 96, pad=0)),
+        ("strided", conv_graph(3, (3, 3), 16, stride=2)),
+        ("a whole output block", conv_graph(8, (7, 7), 96)),
+        ("the stem's 5 outputs", conv_graph(5, (7, 7), 96, cin=3)),
+        ("one row", conv_graph(3, (1, 7), 96)),
+        ("not 'same' padding", conv_graph(3, (7, 7), 96, same=False)),
     ],
 )
 def test_other_convolutions_are_left_alone(why, model):
-    assert optimise.space_to_depth_convs(model) == [], why
+    assert optimise.convs_by_rows(model) == [], why
 
 
-@pytest.mark.parametrize("k,block", [(7, 4), (3, 4), (5, 2), (9, 4)])
-def test_kernel_weight_recovers_the_original_weight(k, block):
-    w = np.random.default_rng(k).standard_normal((3, 5, k, k)).astype(np.float32)
-    wd = optimise.depth_weight(w, block)
-    r = -(-(k // 2) // block)
-    assert wd.shape == (3 * block * block, 5 * block * block, 2 * r + 1, 2 * r + 1)
-    np.testing.assert_array_equal(optimise.kernel_weight(wd, 3, k), w)
+def test_original_parameter_undoes_the_layout():
+    rng = np.random.default_rng(0)
+    w = rng.standard_normal((3, 5, 7, 3)).astype(np.float32)
+    np.testing.assert_array_equal(optimise.original_parameter(optimise.row_weight(w), w.shape), w)
+    model = conv_graph(3, (7, 7), 16)
+    b = numpy_helper.to_array(model.graph.initializer[1])
+    optimise.convs_by_rows(model)
+    rows_bias = numpy_helper.to_array(model.graph.initializer[1])
+    assert rows_bias.shape == (21,)
+    np.testing.assert_array_equal(optimise.original_parameter(rows_bias, b.shape), b)
 
 
 def tensors(model: onnx.ModelProto) -> list[tuple]:
@@ -102,8 +108,10 @@ def test_shipped_model_is_rewritten_and_keeps_its_contract(shipped_model, tmp_pa
         model = onnx.load(shipped_model / spec["file"])
         want = [[(t["name"], t["shape"], t["dtype"]) for t in spec[k]] for k in ("inputs", "outputs")]
         assert tensors(model) == want, stage
-        assert optimise.space_to_depth_convs(model) == [], f"{stage} has a convolution left to rewrite"
-    assert "SpaceToDepth" in {n.op_type for n in onnx.load(shipped_model / "decoder.onnx").graph.node}
+        assert optimise.convs_by_rows(model) == [], f"{stage} has a convolution left to rewrite"
+    decoder = onnx.load(shipped_model / "decoder.onnx")
+    weight = next(t for t in decoder.graph.initializer if t.name == "net.decoder.out.weight")
+    assert list(weight.dims) == [7 * 3, 16, 1, 7], "the decoder's output convolution is not by rows"
 
 
 def real_frame(resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -127,7 +135,7 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
     for stage in contract.STAGES:
         original = onnx.load(tmp_path / contract.stage_file(stage))
         rewritten = copy(original)
-        if not optimise.space_to_depth_convs(rewritten):
+        if not optimise.convs_by_rows(rewritten):
             continue
         feeds = [real[stage], *optimise.random_feeds(original)]
         diffs[stage] = optimise.max_difference(original, rewritten, feeds)
