@@ -33,6 +33,7 @@ import torch
 from onnx import TensorProto, helper
 
 from .. import contract, data, export, model, variants
+from ..runs import hardware
 from . import ROOT, metrics
 
 BENCH = ROOT / "target" / "bench-models"
@@ -99,7 +100,8 @@ def network_timings(folder: Path, threads: tuple[int, ...] = (1, 2), rounds: int
 
     The machine is shared, so the configurations are interleaved: each round times ``frames``
     frames of every one, in an order rotated from round to round, and each reports the median,
-    min and max of its rounds. The load average before and after is recorded with them."""
+    min and max of its rounds. The machine and its load average before and after are recorded
+    with them."""
     net = export.network_from_model(folder)
     m = contract.read(folder / "model.json")
     r = m["resolution"]
@@ -125,7 +127,12 @@ def network_timings(folder: Path, threads: tuple[int, ...] = (1, 2), rounds: int
             for k in keys[i % len(keys) :] + keys[: i % len(keys)]:
                 runs[k](3)  # settles the other configuration's threads and caches
                 times[k].append(1e3 * runs[k](frames) / frames)
-    out: dict = {"rounds": rounds, "frames_a_round": frames, "load_average": [load_before[0], os.getloadavg()[0]]}
+    out: dict = {
+        "machine": hardware(torch.device("cpu")),
+        "rounds": rounds,
+        "frames_a_round": frames,
+        "load_average": [load_before[0], os.getloadavg()[0]],
+    }
     for (name, t), ms in times.items():
         out.setdefault(name, {})[str(t)] = {"median": float(np.median(ms)), "min": min(ms), "max": max(ms)}
     out["peer_ratio"] = {
@@ -183,7 +190,8 @@ def network_table(timings: dict) -> str:
     rows += [
         "",
         f"Milliseconds a frame, median (min-max) of {timings['rounds']} interleaved rounds of "
-        f"{timings['frames_a_round']} frames each; one-minute load average {load[0]:.2f} before, {load[1]:.2f} after.",
+        f"{timings['frames_a_round']} frames each, on {timings['machine']}, shared: one-minute load average "
+        f"{load[0]:.2f} before, {load[1]:.2f} after.",
     ]
     return "\n".join(rows) + "\n"
 
