@@ -188,8 +188,8 @@ def _area_matrix(n_in: int, n_out: int) -> np.ndarray:
     return (m / m.sum(axis=1, keepdims=True)).astype(np.float32)
 
 
-def open_session(path: Path, threads: int = 1) -> ort.InferenceSession:
-    """An ONNX Runtime CPU session of one stage file with the element's settings
+def open_session(path: Path | bytes, threads: int = 1) -> ort.InferenceSession:
+    """An ONNX Runtime CPU session of one stage file (or serialised graph) with the element's settings
     (``plugin/engine/runtime.rs``): ``threads`` threads within an operator, none across
     operators, and no spinning, since stages run one after another and a spinning stage
     would starve the next."""
@@ -197,7 +197,9 @@ def open_session(path: Path, threads: int = 1) -> ort.InferenceSession:
     opts.intra_op_num_threads = threads
     opts.inter_op_num_threads = 1
     opts.add_session_config_entry("session.intra_op.allow_spinning", "0")
-    return ort.InferenceSession(str(path), opts, providers=["CPUExecutionProvider"])
+    return ort.InferenceSession(
+        path if isinstance(path, bytes) else str(path), opts, providers=["CPUExecutionProvider"]
+    )
 
 
 class StageChain:

@@ -4,9 +4,10 @@
 
 The stages let the engine keep the de-lit features between frames and smooth
 them, encode a target light once, skip light prediction when nobody needs it,
-and relight with an unknown source light (see ``contract.py``). Every stage
-and the chained result are checked against PyTorch on real held-out frames;
-the export fails when ONNX Runtime differs by more than ``PARITY_TOLERANCE``.
+and relight with an unknown source light (see ``contract.py``). Each stage is
+rewritten for ONNX Runtime's kernels (``optimise.py``, exact up to rounding).
+Every stage and the chained result are checked against PyTorch on real held-out
+frames; the export fails when ONNX Runtime differs by more than ``PARITY_TOLERANCE``.
 """
 
 from __future__ import annotations
@@ -17,10 +18,12 @@ import json
 from pathlib import Path
 
 import numpy as np
+import onnx
 import torch
+from onnx import numpy_helper
 from torch import nn
 
-from . import contract, data, model
+from . import contract, data, model, optimise
 from .runs import load_network
 
 PARITY_TOLERANCE = 1e-4
@@ -108,6 +111,7 @@ def reference_run(
         }
         out["predicted_light"] = net.predict_light(e)
         out["source_code"] = net.light_encoder(src)
+        out["code"] = out["source_code"]  # the light encoder stage's output, for the source light
         out["target_code"] = net.light_encoder(tgt)
         f = net.delit(e, out["source_code"])
         out.update({f"f{i + 1}": t for i, t in enumerate(f)})
@@ -120,7 +124,6 @@ def export(run: Path, data_root: Path, out: Path) -> dict:
     check_exportable(cfg.net)
     out.mkdir(parents=True, exist_ok=True)
     specs = contract.stage_specs(cfg.net.resolution, cfg.net.widths)
-    modules = stage_modules(net)
 
     held = data.Heldout.load(data_root / "heldout")
     res = cfg.net.resolution
@@ -128,9 +131,15 @@ def export(run: Path, data_root: Path, out: Path) -> dict:
     src = torch.from_numpy(held.lights[0])[None]
     tgt = torch.from_numpy(held.lights[4])[None]
     ref = reference_run(net, image, src, tgt)
-    ref["code"] = ref["source_code"]  # the light encoder's output for the source light
+    write_stages(net, specs, out, ref)
+    report = parity(out, specs, ref)
+    return {"config": cfg, "parity": report}
 
-    for name, module in modules.items():
+
+def write_stages(net: model.LcfnNet, specs: dict, out: Path, ref: dict[str, np.ndarray], rewrite: bool = True) -> None:
+    """The network's five stages as ONNX files in ``out``, traced on ``reference_run``'s
+    tensors, and unless ``rewrite`` is off rewritten by ``optimise``."""
+    for name, module in stage_modules(net).items():
         spec = specs[name]
         inputs = tuple(torch.from_numpy(ref[t["name"]]) for t in spec["inputs"])
         torch.onnx.export(
@@ -142,8 +151,30 @@ def export(run: Path, data_root: Path, out: Path) -> dict:
             opset_version=OPSET,
             dynamo=False,
         )
-    report = parity(out, specs, ref)
-    return {"config": cfg, "parity": report}
+    if rewrite:
+        optimise.optimise_folder(out)
+
+
+def network_from_model(folder: Path) -> model.LcfnNet:
+    """The PyTorch network of an exported model folder, from its stages' weights: the ONNX
+    initializers keep the parameters' names (``net.<name>``), also where ``optimise`` changed a
+    convolution's layout (``optimise.original_parameter``). Lets the benchmark time PyTorch on
+    the very network it times in ONNX Runtime, without the run."""
+    m = contract.read(folder / "model.json")
+    net = model.build(model.NetConfig(resolution=m["resolution"], width=m["widths"][1] / model.PAPER_WIDTHS[1]))
+    params = net.state_dict()
+    state = {}
+    for stage in contract.STAGES:
+        for t in onnx.load(folder / contract.stage_file(stage)).graph.initializer:
+            name = t.name.removeprefix("net.")
+            if name not in params:
+                continue
+            value, shape = numpy_helper.to_array(t), tuple(params[name].shape)
+            if value.shape != shape:
+                value = optimise.original_parameter(value, shape)
+            state[name] = torch.from_numpy(value.copy())
+    net.load_state_dict(state)  # strict: every parameter is in the stages
+    return net.eval()
 
 
 def parity(folder: Path, specs: dict, ref: dict[str, np.ndarray]) -> dict[str, float]:

@@ -1,0 +1,156 @@
+"""The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed by kernel
+rows matches the original up to rounding, on single convolutions and on the shipped network's
+stages with real and random inputs; other convolutions are left alone; the shipped model is
+rewritten and keeps its contract; the benchmark times it with and without the rewrites beside
+PyTorch."""
+
+import numpy as np
+import onnx
+import pytest
+import torch
+from onnx import TensorProto, helper, numpy_helper
+from skimage import data as skdata
+
+from lsyd import contract, data, export, optimise
+from lsyd.evaluation import benchmark
+
+
+def conv_graph(cout: int, kernel: tuple[int, int], size: int, stride: int = 1, same: bool = True, cin: int = 16):
+    """x [1,cin,size,size] -> Conv(kernel, bias) -> Clip(0, 1) -> y, with random weights."""
+    kh, kw = kernel
+    rng = np.random.default_rng(kh * 100 + kw * 10 + cout)
+    pads = [kh // 2, kw // 2] * 2 if same else [0] * 4
+    w = (rng.standard_normal((cout, cin, kh, kw)) / np.sqrt(cin * kh * kw)).astype(np.float32)
+    b = rng.standard_normal(cout).astype(np.float32)
+    nodes = [
+        helper.make_node(
+            "Conv", ["x", "w", "b"], ["h"], "conv", kernel_shape=[kh, kw], pads=pads, strides=[stride] * 2
+        ),
+        helper.make_node("Clip", ["h", "lo", "hi"], ["y"], "clip"),
+    ]
+    out_h = (size + pads[0] + pads[2] - kh) // stride + 1
+    out_w = (size + pads[1] + pads[3] - kw) // stride + 1
+    graph = helper.make_graph(
+        nodes,
+        "conv",
+        [helper.make_tensor_value_info("x", TensorProto.FLOAT, [1, cin, size, size])],
+        [helper.make_tensor_value_info("y", TensorProto.FLOAT, [1, cout, out_h, out_w])],
+        [
+            numpy_helper.from_array(w, "w"),
+            numpy_helper.from_array(b, "b"),
+            numpy_helper.from_array(np.float32(0), "lo"),
+            numpy_helper.from_array(np.float32(1), "hi"),
+        ],
+    )
+    # ir_version pinned: onnx 1.23 writes IR 14 by default, newer than ONNX Runtime 1.31 reads.
+    return helper.make_model(graph, opset_imports=[helper.make_opsetid("", 17)], ir_version=8)
+
+
+def copy(model: onnx.ModelProto) -> onnx.ModelProto:
+    out = onnx.ModelProto()
+    out.CopyFrom(model)
+    return out
+
+
+@pytest.mark.parametrize("cout,kernel,size", [(3, (7, 7), 96), (1, (3, 3), 16), (4, (5, 3), 18), (2, (9, 9), 24)])
+def test_convolution_by_rows_matches_the_original(cout, kernel, size):
+    original = conv_graph(cout, kernel, size)
+    rewritten = copy(original)
+    assert optimise.convs_by_rows(rewritten) == ["conv"]
+    ops = [n.op_type for n in rewritten.graph.node]
+    assert ops == ["Conv"] + ["Slice"] * kernel[0] + ["Sum", "Clip"]
+    assert rewritten.graph.input == original.graph.input
+    assert rewritten.graph.output == original.graph.output
+    # Inputs in [0, 1) and wider, negative ones (a feature map's range), so the clamp cuts both ends.
+    wide = {"x": 4 * np.random.default_rng(1).standard_normal((1, 16, size, size)).astype(np.float32)}
+    diff = optimise.max_difference(original, rewritten, optimise.random_feeds(original) + [wide])
+    assert diff <= optimise.TOLERANCE
+
+
+@pytest.mark.parametrize(
+    "why,model",
+    [
+        ("strided", conv_graph(3, (3, 3), 16, stride=2)),
+        ("a whole output block", conv_graph(8, (7, 7), 96)),
+        ("the stem's 5 outputs", conv_graph(5, (7, 7), 96, cin=3)),
+        ("one row", conv_graph(3, (1, 7), 96)),
+        ("not 'same' padding", conv_graph(3, (7, 7), 96, same=False)),
+    ],
+)
+def test_other_convolutions_are_left_alone(why, model):
+    assert optimise.convs_by_rows(model) == [], why
+
+
+def test_original_parameter_undoes_the_layout():
+    rng = np.random.default_rng(0)
+    w = rng.standard_normal((3, 5, 7, 3)).astype(np.float32)
+    np.testing.assert_array_equal(optimise.original_parameter(optimise.row_weight(w), w.shape), w)
+    model = conv_graph(3, (7, 7), 16)
+    b = numpy_helper.to_array(model.graph.initializer[1])
+    optimise.convs_by_rows(model)
+    rows_bias = numpy_helper.to_array(model.graph.initializer[1])
+    assert rows_bias.shape == (21,)
+    np.testing.assert_array_equal(optimise.original_parameter(rows_bias, b.shape), b)
+
+
+def tensors(model: onnx.ModelProto) -> list[tuple]:
+    def spec(v):
+        t = v.type.tensor_type
+        return v.name, [d.dim_value for d in t.shape.dim], onnx.helper.tensor_dtype_to_np_dtype(t.elem_type).name
+
+    return [[spec(v) for v in model.graph.input], [spec(v) for v in model.graph.output]]
+
+
+def test_shipped_model_is_rewritten_and_keeps_its_contract(shipped_model, tmp_path):
+    m = contract.read(shipped_model / "model.json")
+    for stage in contract.STAGES:
+        spec = m["stages"][stage]
+        model = onnx.load(shipped_model / spec["file"])
+        want = [[(t["name"], t["shape"], t["dtype"]) for t in spec[k]] for k in ("inputs", "outputs")]
+        assert tensors(model) == want, stage
+        assert optimise.convs_by_rows(model) == [], f"{stage} has a convolution left to rewrite"
+    decoder = onnx.load(shipped_model / "decoder.onnx")
+    weight = next(t for t in decoder.graph.initializer if t.name == "net.decoder.out.weight")
+    assert list(weight.dims) == [7 * 3, 16, 1, 7], "the decoder's output convolution is not by rows"
+
+
+def real_frame(resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """scikit-image's astronaut portrait, head and shoulders, as the element crops a face; a
+    white screen and the portrait itself shown on the screen as the source and target lights."""
+    portrait = skdata.astronaut()
+    image = data.to_tensor(data.area_resize(portrait[:320, 90:410], resolution)).numpy()[None]
+    white = contract.light_from_frames(np.full((90, 160, 3), 255, np.uint8))[None]
+    return image, white, contract.light_from_frames(portrait)[None]
+
+
+def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_model, tmp_path):
+    net = export.network_from_model(shipped_model)
+    m = contract.read(shipped_model / "model.json")
+    specs = contract.stage_specs(m["resolution"], tuple(m["widths"]))
+    image, source, target = real_frame(m["resolution"])
+    ref = export.reference_run(net, *(torch.from_numpy(x) for x in (image, source, target)))
+    export.write_stages(net, specs, tmp_path, ref, rewrite=False)
+    real = contract.StageChain(tmp_path).stage_inputs(image, source, target)
+    diffs = {}
+    for stage in contract.STAGES:
+        original = onnx.load(tmp_path / contract.stage_file(stage))
+        rewritten = copy(original)
+        if not optimise.convs_by_rows(rewritten):
+            continue
+        feeds = [real[stage], *optimise.random_feeds(original)]
+        diffs[stage] = optimise.max_difference(original, rewritten, feeds)
+        # The shipped stage is this rewrite of its own weights.
+        shipped = onnx.load(shipped_model / contract.stage_file(stage))
+        assert optimise.max_difference(rewritten, shipped, feeds) == 0.0, stage
+    print(f"max abs difference of the rewritten stages: {diffs}")  # shown with pytest -s
+    assert list(diffs) == ["decoder"]
+    assert max(diffs.values()) <= optimise.TOLERANCE
+
+
+def test_network_timings_compare_the_rewrite_and_the_peer_in_one_run(shipped_model):
+    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1)
+    for name in ("onnxruntime", "onnxruntime, not rewritten", "pytorch"):
+        t = timings[name]["1"]
+        assert 0 < t["min"] <= t["median"] <= t["max"], name
+    assert timings["peer_ratio"]["1"] > 0
+    assert "| 1 |" in benchmark.network_table(timings)
