@@ -105,7 +105,9 @@ def convs_by_rows(model: onnx.ModelProto) -> list[str]:
         for v in [*inferred.input, *inferred.value_info, *inferred.output]
     }
     rewritten = []
-    for conv in [n for n in g.node if _rewritable(n, inits, shapes)]:
+    # By name: rebuilding the node list below replaces the node objects.
+    for name in [n.name for n in g.node if _rewritable(n, inits, shapes)]:
+        at, conv = next((i, n) for i, n in enumerate(g.node) if n.name == name)
         w = inits[conv.input[1]]
         cout, _, kh, kw = w.dims
         height = shapes[conv.input[0]][2]
@@ -141,8 +143,7 @@ def convs_by_rows(model: onnx.ModelProto) -> list[str]:
             )
         nodes.append(helper.make_node("Sum", [n.output[0] for n in nodes], [y], f"{conv.name}/sum"))
         all_nodes = list(g.node)
-        at = all_nodes.index(conv) + 1
-        all_nodes[at:at] = nodes
+        all_nodes[at + 1 : at + 1] = nodes
         del g.node[:]
         g.node.extend(all_nodes)
         rewritten.append(conv.name)
