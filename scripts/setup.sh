@@ -26,14 +26,14 @@ APT=(
 
 say() { printf '\033[1m[setup]\033[0m %s\n' "$*"; }
 
+sudo_=""
+[ "$(id -u)" -eq 0 ] || sudo_=sudo
 missing=()
 for p in "${APT[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
 if ((${#missing[@]})); then
   say "installing Debian packages: ${missing[*]}"
-  sudo_=""
-  [ "$(id -u)" -eq 0 ] || sudo_=sudo
   $sudo_ apt-get update -q
   DEBIAN_FRONTEND=noninteractive $sudo_ apt-get install -y -q --no-install-recommends "${missing[@]}"
 fi
@@ -72,7 +72,9 @@ if [ "$level" = full ]; then
   if [ ! -f "$MEDIA/Megamind.avi" ]; then
     say "fetching Megamind.avi from Debian's opencv-doc package"
     deb_dir=$(mktemp -d)
-    (cd "$deb_dir" && apt-get download -q opencv-doc >/dev/null)
+    # apt-get download needs the package lists, which a fresh image may not have yet.
+    (cd "$deb_dir" && { apt-get download -q opencv-doc >/dev/null 2>&1 ||
+      { $sudo_ apt-get update -q >/dev/null && apt-get download -q opencv-doc >/dev/null; }; })
     dpkg-deb --fsys-tarfile "$deb_dir"/opencv-doc_*.deb |
       tar -x -O ./usr/share/doc/opencv-doc/examples/data/Megamind.avi >"$MEDIA/Megamind.avi"
     rm -r "$deb_dir"
