@@ -255,7 +255,7 @@ impl LsydRelight {
         }
         state.last_face_rt = rt.or(state.last_face_rt);
         state.policy.set_temporal(settings.temporal);
-        state.policy.set_skips(settings.skips);
+        state.policy.set_skips(settings.policy_skips());
         let newer = lock(&self.target).newer_than(state.target_generation);
         if let Some((light, generation)) = newer {
             match state.policy.set_target(&light) {
@@ -570,7 +570,7 @@ impl LsydRelight {
                 ]
             )
         })?;
-        let policy = FramePolicy::new(relighter, settings.temporal, settings.skips);
+        let policy = FramePolicy::new(relighter, settings.temporal, settings.policy_skips());
         Ok((policy, region))
     }
 }

@@ -90,6 +90,15 @@ fn path_of(v: &glib::Value) -> PathBuf {
 }
 
 impl Settings {
+    /// The skips the policy applies. While the face is followed, a frame reaches the
+    /// network only with a face found, so the presence check would only repeat it.
+    pub fn policy_skips(&self) -> Skips {
+        Skips {
+            skip_absent: self.skips.skip_absent && !self.face_tracking,
+            ..self.skips
+        }
+    }
+
     /// Sets a property by name; false for a name that is not a setting (the
     /// element handles those: `stats`).
     pub fn set(&mut self, name: &str, v: &glib::Value) -> bool {
@@ -352,7 +361,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("skip-absent")
                 .nick("Skip when nobody is there")
-                .blurb("Pass frames through untouched while the model's presence stage sees nobody in the face region (the user walked away)")
+                .blurb("With face-tracking=false: pass frames through untouched while the model's presence stage sees nobody in the face region (the user walked away); a followed face needs no such check")
                 .default_value(d.skips.skip_absent)
                 .mutable_playing()
                 .build(),
@@ -378,4 +387,20 @@ pub fn properties() -> &'static [glib::ParamSpec] {
         ]
     });
     PROPERTIES.as_ref()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_presence_check_runs_only_for_a_fixed_region() {
+        let mut s = Settings::default();
+        assert!(s.skips.skip_absent && s.face_tracking);
+        assert!(!s.policy_skips().skip_absent, "a followed face is the check");
+        s.face_tracking = false;
+        assert!(s.policy_skips().skip_absent);
+        s.skips.skip_absent = false;
+        assert!(!s.policy_skips().skip_absent, "the user turned it off");
+    }
 }
