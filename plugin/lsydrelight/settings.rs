@@ -395,12 +395,18 @@ mod tests {
 
     #[test]
     fn the_presence_check_runs_only_for_a_fixed_region() {
-        let mut s = Settings::default();
-        assert!(s.skips.skip_absent && s.face_tracking);
-        assert!(!s.policy_skips().skip_absent, "a followed face is the check");
-        s.face_tracking = false;
-        assert!(s.policy_skips().skip_absent);
-        s.skips.skip_absent = false;
-        assert!(!s.policy_skips().skip_absent, "the user turned it off");
+        let mut settings = Settings::default();
+        assert!(settings.skips.skip_absent && settings.face_tracking);
+        assert!(
+            !settings.policy_skips().skip_absent,
+            "a followed face is the check"
+        );
+        settings.face_tracking = false;
+        assert!(settings.policy_skips().skip_absent);
+        settings.skips.skip_absent = false;
+        assert!(
+            !settings.policy_skips().skip_absent,
+            "the user turned it off"
+        );
     }
 }
