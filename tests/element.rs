@@ -258,18 +258,15 @@ fn prediction_runs_only_when_someone_needs_it() {
     let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
     h.set_src_caps(c.clone());
     mh.set_src_caps(rgb_caps(256, 144, 30));
-    for i in 0..3 {
-        mh.push(monitor_buffer(
-            Vec3::new(0.8, 0.8, 0.8),
-            frame_time(i),
-            FRAME,
-        ))
-        .unwrap();
-        if i > 0 {
-            h.push(buffer(face_rgb(), &c, frame_time(i - 1), FRAME))
-                .unwrap();
-            h.pull().unwrap();
-        }
+    // Each face frame goes in before the monitor frame after it: a sink pad holds one
+    // buffer until the element takes it, and it takes monitor frames for face frames.
+    let grey = |i| monitor_buffer(Vec3::new(0.8, 0.8, 0.8), frame_time(i), FRAME);
+    mh.push(grey(0)).unwrap();
+    for i in 1..3 {
+        h.push(buffer(face_rgb(), &c, frame_time(i - 1), FRAME))
+            .unwrap();
+        mh.push(grey(i)).unwrap();
+        h.pull().unwrap();
     }
     assert_eq!(stat(&e, "known-source"), 2);
     assert_eq!(
