@@ -11,7 +11,7 @@ use std::sync::{Mutex, OnceLock};
 
 use ort::environment::Environment;
 use ort::session::Session;
-use ort::session::builder::GraphOptimizationLevel;
+use ort::session::builder::{GraphOptimizationLevel, SessionBuilder};
 use ort::value::{TensorElementType, ValueType};
 
 use super::contract::{ContractError, Manifest, PRESENCE_STAGE, STAGES, StageSpec, TensorSpec};
@@ -156,6 +156,21 @@ pub fn load_model(
     ))
 }
 
+/// A session builder with the settings every session of the element shares: full
+/// graph optimisation, `threads` intra-op threads, and no spinning, because the
+/// sessions run one after another (the stages, the presence check, the face
+/// detector) and a spinning pool would starve the next one.
+pub(crate) fn session_builder(env: &Environment, threads: usize) -> ort::Result<SessionBuilder> {
+    Session::builder(env)
+        .and_then(|b| {
+            b.with_optimization_level(GraphOptimizationLevel::Level3)
+                .map_err(Into::into)
+        })
+        .and_then(|b| b.with_intra_threads(threads.max(1)).map_err(Into::into))
+        .and_then(|b| b.with_inter_threads(1).map_err(Into::into))
+        .and_then(|b| b.with_intra_op_spinning(false).map_err(Into::into))
+}
+
 fn open_session(
     env: &Environment,
     path: &Path,
@@ -165,16 +180,7 @@ fn open_session(
     let fail = |e: &dyn fmt::Display| {
         EngineError::Model(ContractError::Unreadable(path.to_path_buf(), e.to_string()))
     };
-    let mut builder = Session::builder(env)
-        .and_then(|b| {
-            b.with_optimization_level(GraphOptimizationLevel::Level3)
-                .map_err(Into::into)
-        })
-        .and_then(|b| b.with_intra_threads(threads.max(1)).map_err(Into::into))
-        .and_then(|b| b.with_inter_threads(1).map_err(Into::into))
-        // Stages run one after another; spinning threads of one would starve the next.
-        .and_then(|b| b.with_intra_op_spinning(false).map_err(Into::into))
-        .map_err(|e| fail(&e))?;
+    let mut builder = session_builder(env, threads).map_err(|e| fail(&e))?;
     if provider == Provider::Cuda {
         builder = builder
             .with_execution_providers([ort::ep::CUDA::default().build().error_on_failure()])

@@ -12,12 +12,11 @@ use std::path::{Path, PathBuf};
 
 use ort::environment::Environment;
 use ort::session::Session;
-use ort::session::builder::GraphOptimizationLevel;
 use ort::value::{TensorRef, ValueType};
 
 use super::{FaceBox, Square, sample_square};
 use crate::engine::EngineError;
-use crate::engine::runtime::inference;
+use crate::engine::runtime::{inference, session_builder};
 use crate::frame::Frame;
 
 /// Side of the network's square input.
@@ -109,15 +108,7 @@ impl FaceDetector {
         }
         let unreadable =
             |e: &dyn fmt::Display| DetectorError::Unreadable(path.to_path_buf(), e.to_string());
-        let session = Session::builder(env)
-            .and_then(|b| {
-                b.with_optimization_level(GraphOptimizationLevel::Level3)
-                    .map_err(Into::into)
-            })
-            .and_then(|b| b.with_intra_threads(threads.max(1)).map_err(Into::into))
-            .and_then(|b| b.with_inter_threads(1).map_err(Into::into))
-            // It runs between the relighting network's stages; spinning threads would starve them.
-            .and_then(|b| b.with_intra_op_spinning(false).map_err(Into::into))
+        let session = session_builder(env, threads)
             .and_then(|mut b| b.commit_from_file(path))
             .map_err(|e| unreadable(&e))?;
         check_session(&session).map_err(|e| DetectorError::Mismatch(path.to_path_buf(), e))?;

@@ -215,21 +215,23 @@ fn average(
     (means, covered)
 }
 
+/// A square face box centred at (`cx`, `cy`), for the module's tests.
+#[cfg(test)]
+pub(crate) fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
+    FaceBox {
+        cx,
+        cy,
+        width: size,
+        height: size,
+        score: 0.9,
+        keypoints: [[cx, cy]; 6],
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::frame::{Frame, PixelFormat, Plane, YuvMatrix};
-
-    fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
-        FaceBox {
-            cx,
-            cy,
-            width: size,
-            height: size,
-            score: 0.9,
-            keypoints: [[cx, cy]; 6],
-        }
-    }
 
     #[test]
     fn a_square_is_moved_into_the_frame_and_no_larger_than_it() {

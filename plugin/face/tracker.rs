@@ -359,17 +359,7 @@ impl OneEuro {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
-        FaceBox {
-            cx,
-            cy,
-            width: size,
-            height: size,
-            score: 0.9,
-            keypoints: [[cx, cy]; 6],
-        }
-    }
+    use crate::face::face;
 
     /// A grey 320x240 frame: the tracker's thumbnails see nothing change, so
     /// only the interval decides when the (scripted) detector runs.
