@@ -4,7 +4,7 @@
 #   scripts/train-starter.sh [DATA] [RUN]      (defaults: data/starter runs/starter)
 #
 # The simulator's people 100-131 (skin tones, face shapes, hair, each in their own
-# outfit and room) sit one capture session each in front of the desk light stage;
+# outfit and room) sit one 30 s capture session each in front of the desk light stage;
 # pairs are found by facial keypoints within each session, as on real captures.
 # People 200-207 are never trained on: their held-out sets (9 poses x 9 lights)
 # measure the model on strangers. Every step is skipped when its output exists, so
@@ -13,7 +13,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${1:-data/starter}
 run=${2:-runs/starter}
-seconds=${STARTER_SECONDS:-36}
+seconds=${STARTER_SECONDS:-30}
 steps=${STARTER_STEPS:-6000}
 train_people=$(seq 100 131)
 unseen_people=$(seq 200 207)
