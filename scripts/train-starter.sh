@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 data=${1:-data/starter}
 run=${2:-runs/starter}
 seconds=${STARTER_SECONDS:-30}
-steps=${STARTER_STEPS:-6000}
+steps=${STARTER_STEPS:-3000}
 train_people=$(seq 100 131)
 unseen_people=$(seq 200 207)
 
