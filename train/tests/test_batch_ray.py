@@ -9,10 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-import pytest
 from conftest import ROOT
-
-pytest.importorskip("ray")
 
 FRAMES = 12
 

@@ -9,10 +9,8 @@ import os
 import subprocess
 from pathlib import Path
 
-import pytest
+import yaml
 from conftest import ROOT
-
-yaml = pytest.importorskip("yaml")
 
 DEPLOY = ROOT / "deploy" / "kubernetes"
 OPT = "/opt/lsydrelight"
