@@ -351,6 +351,50 @@ fn live_rates_align_by_running_time() {
     );
 }
 
+/// The minimum latency a live pipeline reports through the element.
+fn reported_latency(element_properties: &str) -> gst::ClockTime {
+    let pipeline = gst::parse::launch(&format!(
+        "lsydrelight name=r {element_properties} \
+         videotestsrc is-live=true ! video/x-raw,width=160,height=120,framerate=30/1 ! r.sink \
+         r.src ! appsink name=out sync=false"
+    ))
+    .unwrap()
+    .downcast::<gst::Pipeline>()
+    .unwrap();
+    let out = pipeline
+        .by_name("out")
+        .unwrap()
+        .downcast::<gst_app::AppSink>()
+        .unwrap();
+    pipeline.set_state(gst::State::Playing).unwrap();
+    out.pull_sample().expect("a relit frame");
+    let mut q = gst::query::Latency::new();
+    assert!(out.static_pad("sink").unwrap().peer_query(&mut q));
+    pipeline.set_state(gst::State::Null).unwrap();
+    let (live, min, _) = q.result();
+    assert!(live);
+    min
+}
+
+#[test]
+fn the_reported_latency_allows_for_relighting() {
+    // Relighting starts only once a frame's monitor light is in (or its wait timed
+    // out), so its time must be in the latency a live sink allows for, or the sink
+    // drops every frame that took longer than the sink's own margin.
+    init();
+    let none = reported_latency("processing-latency=0");
+    assert_eq!(
+        reported_latency("") - none,
+        gst::ClockTime::from_mseconds(33),
+        "default processing latency"
+    );
+    assert_eq!(
+        reported_latency("processing-latency=50000000 monitor-offset=-20000000") - none,
+        gst::ClockTime::from_mseconds(70),
+        "processing latency and the wait for a lagging screen capture"
+    );
+}
+
 #[test]
 fn a_silent_monitor_branch_in_a_non_live_pipeline_is_named() {
     // A monitor branch that never produces holds a non-live pipeline (the element

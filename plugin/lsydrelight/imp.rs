@@ -96,6 +96,22 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl LsydRelight {
+    /// The latency this element adds: the wait for monitor frames that lag the face
+    /// (a negative `monitor-offset`) plus the time to relight a frame.
+    fn report_latency(&self) {
+        let (offset, processing) = {
+            let s = lock(&self.settings);
+            (s.monitor_offset, s.processing_latency)
+        };
+        let wait = gst::ClockTime::from_nseconds((-offset).max(0) as u64);
+        gst::debug!(
+            CAT,
+            imp = self,
+            "latency: monitor wait {wait}, processing {processing}"
+        );
+        self.obj().set_latency(wait + processing, None);
+    }
+
     fn settings(&self) -> Settings {
         lock(&self.settings).clone()
     }
@@ -664,12 +680,9 @@ impl ObjectImpl for LsydRelight {
     fn set_property(&self, _id: usize, value: &glib::Value, pspec: &glib::ParamSpec) {
         match pspec.name() {
             "target-location" => self.set_target_location(value),
-            "monitor-offset" => {
-                let offset: i64 = value.get().expect("GObject checked the value's type");
-                lock(&self.settings).set("monitor-offset", value);
-                // A negative offset means waiting for monitor frames after the face frame.
-                self.obj()
-                    .set_latency(gst::ClockTime::from_nseconds((-offset).max(0) as u64), None);
+            "monitor-offset" | "processing-latency" => {
+                lock(&self.settings).set(pspec.name(), value);
+                self.report_latency();
             }
             name => {
                 let known = lock(&self.settings).set(name, value);
@@ -692,6 +705,7 @@ impl ObjectImpl for LsydRelight {
         let obj = self.obj();
         obj.add_pad(&self.face_pad).expect("add sink pad");
         obj.add_pad(&self.monitor_src).expect("add monitor_src pad");
+        self.report_latency();
     }
 
     fn dispose(&self) {

@@ -15,6 +15,9 @@ use crate::paths;
 pub const DEFAULT_THREADS: u32 = 2;
 const MAX_MONITOR_OFFSET: i64 = 10_000_000_000;
 const DEFAULT_MONITOR_TIMEOUT: gst::ClockTime = gst::ClockTime::from_seconds(1);
+/// About one frame at 30 fps: relighting a 1080p frame takes 10 ms on an idle 2-core machine,
+/// and live sinks drop what arrives later than the latency the pipeline reported.
+const DEFAULT_PROCESSING_LATENCY: gst::ClockTime = gst::ClockTime::from_mseconds(33);
 const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
@@ -40,6 +43,8 @@ pub struct Settings {
     /// Nanoseconds by which the monitor content that lit a face frame precedes it.
     pub monitor_offset: i64,
     pub monitor_timeout: gst::ClockTime,
+    /// Time the element takes for a frame, added to the latency it reports.
+    pub processing_latency: gst::ClockTime,
     pub temporal: Temporal,
     /// Follow the face with the detector; otherwise `crop` fixes the region.
     pub face_tracking: bool,
@@ -64,6 +69,7 @@ impl Default for Settings {
             target_location: paths::default_target(),
             monitor_offset: 0,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
+            processing_latency: DEFAULT_PROCESSING_LATENCY,
             temporal: Temporal::default(),
             face_tracking: true,
             face_detector_location: paths::default_face_detector(),
@@ -113,6 +119,9 @@ impl Settings {
             "monitor-timeout" => {
                 self.monitor_timeout = gst::ClockTime::from_nseconds(v.get().expect(checked))
             }
+            "processing-latency" => {
+                self.processing_latency = gst::ClockTime::from_nseconds(v.get().expect(checked))
+            }
             "alpha" => self.temporal.alpha = v.get().expect(checked),
             "beta" => self.temporal.beta = v.get().expect(checked),
             "average-frames" => {
@@ -156,6 +165,7 @@ impl Settings {
             "target-location" => path_value(&self.target_location),
             "monitor-offset" => self.monitor_offset.to_value(),
             "monitor-timeout" => self.monitor_timeout.nseconds().to_value(),
+            "processing-latency" => self.processing_latency.nseconds().to_value(),
             "alpha" => self.temporal.alpha.to_value(),
             "beta" => self.temporal.beta.to_value(),
             "average-frames" => (self.temporal.average_frames as u32).to_value(),
@@ -231,6 +241,13 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .blurb("Nanoseconds a monitor frame stays on screen without a newer one (or its duration, if longer); after that the monitor stream counts as stalled and the predicted light is used. In a non-live pipeline, also how long face frames wait for a monitor stream that sends nothing before a warning says so")
                 .default_value(DEFAULT_MONITOR_TIMEOUT.nseconds())
                 .mutable_playing()
+                .build(),
+            glib::ParamSpecUInt64::builder("processing-latency")
+                .nick("Processing latency")
+                .blurb("Nanoseconds the element may take to relight a frame, added to the latency it reports so that live sinks allow for it (it starts relighting only once the frame's monitor light is in or its wait has timed out)")
+                .maximum(gst::ClockTime::SECOND.nseconds())
+                .default_value(DEFAULT_PROCESSING_LATENCY.nseconds())
+                .mutable_ready()
                 .build(),
             glib::ParamSpecFloat::builder("alpha")
                 .nick("Feature smoothing")
