@@ -229,7 +229,13 @@ mod tests {
             assert!((*a - *b).length() < 1e-5, "{a:?} {b:?}");
         }
         // 48 columns on 32 cells: column 0 white fills cell 0 and half of cell 1's 1.5 columns.
-        let l = screen_light(48, 16, 16, 32, |x, _| if x == 0 { [255; 3] } else { [0; 3] });
+        let l = screen_light(
+            48,
+            16,
+            16,
+            32,
+            |x, _| if x == 0 { [255; 3] } else { [0; 3] },
+        );
         assert!((l.rgb[0].x - 1.0 / 1.5).abs() < 1e-5, "{:?}", l.rgb[0]);
         assert!(l.rgb[1].x.abs() < 1e-6);
         // A single pixel lights every cell.
@@ -248,7 +254,10 @@ mod tests {
             ..WebcamSettings::default()
         });
         let dark_in_lit_room = mean_byte(&lit_room.frame(1.0, 0, &uniform(0.05)));
-        assert!(dark_in_lit_room > dark + 20.0, "{dark} -> {dark_in_lit_room}");
+        assert!(
+            dark_in_lit_room > dark + 20.0,
+            "{dark} -> {dark_in_lit_room}"
+        );
     }
 
     #[test]

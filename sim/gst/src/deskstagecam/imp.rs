@@ -182,7 +182,11 @@ impl VideoFilterImpl for DeskstageCam {
             .find(|(f, _, _)| *f == in_info.format())
             .map(|&(_, offsets, size)| (offsets, size))
             .ok_or_else(|| {
-                gst::loggable_error!(CAT, "screen format {:?} is not packed RGB", in_info.format())
+                gst::loggable_error!(
+                    CAT,
+                    "screen format {:?} is not packed RGB",
+                    in_info.format()
+                )
             })?;
         let webcam = Webcam::new(deskstage::webcam::WebcamSettings {
             width: out_info.width() as usize,
@@ -227,7 +231,11 @@ impl VideoFilterImpl for DeskstageCam {
         // Without a timestamp a frame counts as the next due one.
         let at = running.unwrap_or_else(|| state.next_due.unwrap_or(0));
         if state.next_due.is_some_and(|due| at < due) {
-            gst::trace!(CAT, imp = self, "screen frame at {at} ns before the next camera frame");
+            gst::trace!(
+                CAT,
+                imp = self,
+                "screen frame at {at} ns before the next camera frame"
+            );
             return Ok(gst_base::BASE_TRANSFORM_FLOW_DROPPED);
         }
         // The next frame is due one interval after this one was; after a lag
@@ -246,9 +254,7 @@ impl VideoFilterImpl for DeskstageCam {
             monitor.cols,
             |x, y| offsets.map(|o| data[y * stride + x * size + o]),
         );
-        let image = state
-            .webcam
-            .frame(at as f64 / 1e9, state.filmed, &light);
+        let image = state.webcam.frame(at as f64 / 1e9, state.filmed, &light);
         state.filmed += 1;
 
         let out_stride = outframe.plane_stride()[0] as usize;

@@ -51,7 +51,10 @@ glib::wrapper! {
 #[enum_type(name = "GstDeskstageCamMotion")]
 pub enum Motion {
     #[default]
-    #[enum_value(name = "Natural: head turns, talking, smiling, blinking", nick = "natural")]
+    #[enum_value(
+        name = "Natural: head turns, talking, smiling, blinking",
+        nick = "natural"
+    )]
     Natural = 0,
     #[enum_value(name = "Frozen: one pose and expression throughout", nick = "frozen")]
     Frozen = 1,
