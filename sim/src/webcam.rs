@@ -154,12 +154,12 @@ pub fn screen_light(
     let xs = overlaps(width, cols);
     let ys = overlaps(height, rows);
     let mut sums = vec![crate::math::Vec3::ZERO; rows * cols];
-    for y in 0..height {
-        for x in 0..width {
+    for (y, rows_of_y) in ys.iter().enumerate() {
+        for (x, cols_of_x) in xs.iter().enumerate() {
             let [r, g, b] = pixel(x, y);
             let v = crate::math::Vec3::new(lut[r as usize], lut[g as usize], lut[b as usize]);
-            for &(row, wy) in &ys[y] {
-                for &(col, wx) in &xs[x] {
+            for &(row, wy) in rows_of_y {
+                for &(col, wx) in cols_of_x {
                     sums[row * cols + col] += v * (wx * wy);
                 }
             }
