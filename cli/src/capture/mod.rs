@@ -336,7 +336,7 @@ fn watch(
         }
         if last_status.elapsed() >= STATUS_INTERVAL {
             last_status = Instant::now();
-            status.say(&status_text(&record::lock(recorder), stopping.is_some()));
+            status.say(&status_text(&record::lock(recorder), stopping));
         }
         let Some(message) = bus.timed_pop(gst::ClockTime::from_mseconds(100)) else {
             continue;
@@ -352,8 +352,8 @@ fn watch(
     }
 }
 
-/// The live status line.
-fn status_text(r: &Recorder, stopping: bool) -> String {
+/// The live status line; `stopping` once end-of-stream is on its way.
+fn status_text(r: &Recorder, stopping: Option<End>) -> String {
     let s = r.guidance.summary();
     let t = r.camera_time.unwrap_or(0.0);
     let share = match s.monitor_share_recent {
@@ -362,14 +362,18 @@ fn status_text(r: &Recorder, stopping: bool) -> String {
     };
     format!(
         "{} {:>5.1} s | usable frames {} of {} | monitor's share of face light {} | poses {}/{}{}",
-        if stopping { "finishing" } else { "REC" },
+        if stopping.is_some() {
+            "finishing"
+        } else {
+            "REC"
+        },
         t,
         s.usable_frames,
         r.camera_frames,
         share,
         s.pose_bins_covered,
         s.pose_bins,
-        if stopping {
+        if stopping == Some(End::Stopped) {
             " | Ctrl-C again to abort"
         } else {
             ""
