@@ -110,12 +110,6 @@ fn check_session(dir: &Path) -> serde_json::Value {
     assert_eq!(tshape, [m]);
     assert!(light_times.windows(2).all(|w| w[1] >= w[0]));
     assert!(light_times[0] < 0.5);
-    // The blinking screen: whole frames of white and of black, both recorded.
-    let frame_means: Vec<f32> = light
-        .chunks(3 * 16 * 32)
-        .map(|f| f.iter().sum::<f32>() / f.len() as f32)
-        .collect();
-    assert!(frame_means.iter().any(|&v| v > 0.99) && frame_means.iter().any(|&v| v < 0.01));
     // Every camera frame has a screen frame at or before it.
     assert!(light_times[0] <= times[0] && *light_times.last().unwrap() >= times[times.len() - 2]);
     let seconds = s["seconds"].as_f64().unwrap();
@@ -124,6 +118,16 @@ fn check_session(dir: &Path) -> serde_json::Value {
         "{seconds} vs {times:?}"
     );
     s
+}
+
+/// The blinking screen's light: whole frames of white and of black, both recorded.
+fn assert_blinks(session: &Path) {
+    let (_, light) = read_npy::<f32>(&session.join("light.npy")).unwrap();
+    let frame_means: Vec<f32> = light
+        .chunks(3 * 16 * 32)
+        .map(|f| f.iter().sum::<f32>() / f.len() as f32)
+        .collect();
+    assert!(frame_means.iter().any(|&v| v > 0.99) && frame_means.iter().any(|&v| v < 0.01));
 }
 
 fn files_in(dir: &Path) -> Vec<String> {
@@ -142,6 +146,7 @@ fn sessions_append_with_camera_and_light_but_no_screen_unless_asked() {
     let o = run(capture(&out, Some("4"), "", &[]));
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
     let first = check_session(&out.join("session-000"));
+    assert_blinks(&out.join("session-000"));
     // No screen content on disk: only the camera, the light grid and the metadata.
     assert_eq!(
         files_in(&out.join("session-000")),
@@ -332,4 +337,39 @@ fn bad_input_fails_with_a_clear_message_and_records_nothing() {
         "{err}"
     );
     assert_eq!(files_in(&newer), ["capture.json"]);
+}
+
+#[test]
+fn a_playlist_is_the_screen_content() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("me");
+    let video = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/data/call/monitor.mp4");
+    let o = run({
+        let mut c = Command::new(env!("CARGO_BIN_EXE_lsydrelight"));
+        c.arg("capture")
+            .arg("--out")
+            .arg(&out)
+            .arg("--playlist")
+            .arg(&video);
+        c.args(["--display", "fakesink sync=false", "--seconds", "2"]);
+        c.args(["--camera", &camera("")]);
+        c
+    });
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let s = check_session(&out.join("session-000"));
+    assert!(
+        s["screen"].as_str().unwrap().starts_with("playlist: "),
+        "{s}"
+    );
+    // The shipped monitor video's light, letterboxed into 16:9 (it is 16:9 already).
+    let (shape, light) = read_npy::<f32>(&out.join("session-000/light.npy")).unwrap();
+    assert!(shape[0] >= 30, "{shape:?}: 2 s of a 30 fps video");
+    assert!(light.iter().all(|v| (0.0..=1.0).contains(v)));
+    let first = &light[..3 * 16 * 32];
+    let spread = first.iter().cloned().fold(f32::MIN, f32::max)
+        - first.iter().cloned().fold(f32::MAX, f32::min);
+    assert!(
+        spread > 0.05,
+        "the content varies across the screen: {spread}"
+    );
 }
