@@ -32,8 +32,8 @@ use record::Recorder;
         varied videos full-screen (or pass --playlist to have them played); turn and tilt your \
         head, talk and smile now and then. The webcam and the screen are recorded together, in one \
         GStreamer pipeline on one clock, into --out DIR as a new session (session-000, \
-        session-001, ...; capture.json lists them). `lsydrelight train --capture DIR` makes a \
-        model of you from the folder.\n\n\
+        session-001, ...; capture.json lists them). `lsydrelight train` makes a model of you \
+        from the folder.\n\n\
         While recording, a status line counts the usable frames (a face found, large enough, \
         the screen's light known), the monitor's share of the light on your face (measured from \
         how your face's brightness follows the screen's), and the head poses covered; warnings \
@@ -54,10 +54,9 @@ use record::Recorder;
   lsydrelight capture --out me --playlist clips/*.mp4
   lsydrelight capture --out me --held-out --seconds 120
   lsydrelight capture --out me --camera \"v4l2src device=/dev/video2 ! videoconvert\"
-  A simulated person (the deskstagecam element) watching a test pattern:
-  lsydrelight capture --out sim --seconds 10 \\
-      --screen \"videotestsrc is-live=true pattern=ball\" \\
-      --camera \"screen. ! queue ! deskstagecam subject=201\"
+  A simulated person (the deskstagecam element) watching the shipped monitor video:
+  lsydrelight capture --out sim --playlist examples/data/call/monitor.mp4 \\
+      --display \"fakesink sync=false\" --camera \"screen. ! queue ! deskstagecam subject=201\"
 
 ",
         crate::exit::codes_help!()
