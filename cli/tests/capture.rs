@@ -343,20 +343,46 @@ fn bad_input_fails_with_a_clear_message_and_records_nothing() {
     assert_eq!(files_in(&newer), ["capture.json"]);
 }
 
+/// Encodes one second (15 frames) of a solid test pattern into `path`.
+fn clip(path: &Path, pattern: &str, size: (u32, u32), mux: &str) {
+    gst::init().unwrap();
+    let pipeline = gst::parse::launch(&format!(
+        "videotestsrc num-buffers=15 pattern={pattern} ! video/x-raw,width={},height={},\
+         framerate=15/1 ! videoconvert ! x264enc ! {mux} ! filesink location=\"{}\"",
+        size.0,
+        size.1,
+        path.display()
+    ))
+    .unwrap();
+    pipeline.set_state(gst::State::Playing).unwrap();
+    let bus = pipeline.bus().unwrap();
+    let end = bus.timed_pop_filtered(
+        gst::ClockTime::from_seconds(60),
+        &[gst::MessageType::Eos, gst::MessageType::Error],
+    );
+    pipeline.set_state(gst::State::Null).unwrap();
+    assert!(matches!(
+        end.map(|m| m.type_()),
+        Some(gst::MessageType::Eos)
+    ));
+}
+
 #[test]
-fn a_playlist_is_the_screen_content() {
+fn a_playlist_is_played_in_turn_and_is_the_screen_content() {
     let dir = tempfile::tempdir().unwrap();
+    let (white, red) = (dir.path().join("white.mp4"), dir.path().join("red.mkv"));
+    clip(&white, "white", (320, 180), "mp4mux");
+    clip(&red, "red", (160, 120), "matroskamux");
     let out = dir.path().join("me");
-    let video = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/data/call/monitor.mp4");
     let o = run({
         let mut c = Command::new(env!("CARGO_BIN_EXE_lsydrelight"));
         c.arg("capture")
             .arg("--out")
             .arg(&out)
             .arg("--playlist")
-            .arg(&video);
-        c.args(["--display", "fakesink sync=false", "--seconds", "2"]);
-        c.args(["--camera", &camera("")]);
+            .arg(&white)
+            .arg(&red);
+        c.args(["--display", "fakesink sync=false", "--camera", &camera("")]);
         c
     });
     assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
@@ -365,14 +391,23 @@ fn a_playlist_is_the_screen_content() {
         s["screen"].as_str().unwrap().starts_with("playlist: "),
         "{s}"
     );
-    // The shipped monitor video's light, letterboxed into 16:9 (it is 16:9 already).
+    // One second of white, then one of red: a 4:3 video letterboxed into the 16:9
+    // screen, as a full-screen player shows it, so its side columns are black.
     let (shape, light) = read_npy::<f32>(&out.join("session-000/light.npy")).unwrap();
-    assert!(shape[0] >= 30, "{shape:?}: 2 s of a 30 fps video");
-    let first = &light[..3 * 16 * 32];
-    let spread = first.iter().cloned().fold(f32::MIN, f32::max)
-        - first.iter().cloned().fold(f32::MAX, f32::min);
+    let (_, times) = read_npy::<f64>(&out.join("session-000/light-times.npy")).unwrap();
+    assert_eq!(shape[0], 30, "every frame of both videos");
+    assert!((times[29] - 29.0 / 15.0).abs() < 0.01, "{times:?}");
+    let cell = |frame: usize, channel: usize, col: usize| {
+        light[((frame * 3 + channel) * 16 + 8) * 32 + col]
+    };
+    assert!((cell(0, 1, 0) - 1.0).abs() < 0.01, "white at first");
     assert!(
-        spread > 0.05,
-        "the content varies across the screen: {spread}"
+        (cell(29, 0, 16) - 1.0).abs() < 0.05,
+        "red in the middle at the end"
     );
+    assert!(
+        cell(29, 1, 16) < 0.02 && cell(29, 0, 0) < 0.02,
+        "black borders"
+    );
+    assert_eq!(s["camera_frames"].as_u64(), Some(12), "6 fps for 2 s");
 }
