@@ -1,9 +1,10 @@
 //! `lsydrelight`, the project's command-line tool. One module per subcommand
-//! (`relight` now; `capture` and `train` to come), sharing the conventions in
+//! (`relight`, `capture`; `train` to come), sharing the conventions in
 //! [`exit`] (exit codes and error messages), [`interrupt`] (Ctrl-C),
 //! [`partial`] (outputs renamed into place only when complete) and
 //! [`progress`] (progress bars).
 
+mod capture;
 mod exit;
 mod interrupt;
 mod partial;
@@ -27,6 +28,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Relight(relight::Args),
+    Capture(capture::Args),
 }
 
 fn main() -> exit::Status {
@@ -39,8 +41,14 @@ fn main() -> exit::Status {
         eprintln!("error: cannot register the lsydrelight element: {e}");
         return exit::Status::Failure;
     }
+    // The simulated webcam, so that a capture can film a simulated person.
+    if let Err(e) = gstdeskstage::plugin_register_static() {
+        eprintln!("error: cannot register the deskstagecam element: {e}");
+        return exit::Status::Failure;
+    }
     interrupt::install();
     match cli.command {
         Command::Relight(args) => relight::run(args, cli.quiet),
+        Command::Capture(args) => capture::run(args, cli.quiet),
     }
 }

@@ -1,5 +1,5 @@
-//! Outputs written under a temporary name beside the final one and renamed
-//! into place only when complete, so a failed or aborted run never leaves a
+//! Outputs (files, or folders of them) written under a temporary name beside
+//! the final one and renamed into place only when complete, so a failed or aborted run never leaves a
 //! partial file under the name the user asked for (and never replaces an older
 //! complete one with it).
 
@@ -55,14 +55,22 @@ impl Partial {
 impl Drop for Partial {
     fn drop(&mut self) {
         // After a commit the file is gone from here; removing it again is harmless.
-        let _ = std::fs::remove_file(&self.temp);
+        remove(&self.temp);
         open().retain(|t| *t != self.temp);
     }
 }
 
-/// Removes every temporary file still being written (Ctrl-C pressed twice).
+/// Removes every temporary file (or folder) still being written (Ctrl-C pressed twice).
 pub fn remove_all() {
     for temp in open().iter() {
+        remove(temp);
+    }
+}
+
+fn remove(temp: &Path) {
+    if temp.is_dir() {
+        let _ = std::fs::remove_dir_all(temp);
+    } else {
         let _ = std::fs::remove_file(temp);
     }
 }

@@ -33,6 +33,13 @@ impl Bars {
         Bar(bar)
     }
 
+    /// A line of live status below the notes, redrawn in place.
+    pub fn status_line(&self) -> StatusLine {
+        let bar = self.multi.add(ProgressBar::no_length());
+        bar.set_style(style("{spinner} {msg}"));
+        StatusLine(bar)
+    }
+
     /// A warning or note on standard error, above the bars.
     pub fn note(&self, line: &str) {
         if !self.quiet {
@@ -77,4 +84,18 @@ fn style(template: &str) -> ProgressStyle {
         .with_key("fps", |s: &ProgressState, w: &mut dyn Write| {
             let _ = write!(w, "{:.1}", s.per_sec());
         })
+}
+
+/// A line of text that says how a live job is doing, redrawn in place.
+pub struct StatusLine(ProgressBar);
+
+impl StatusLine {
+    pub fn say(&self, text: &str) {
+        self.0.set_message(text.to_string());
+        self.0.tick();
+    }
+
+    pub fn finish(&self) {
+        self.0.finish_and_clear();
+    }
 }

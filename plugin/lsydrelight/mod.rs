@@ -64,6 +64,9 @@ mod target;
 mod video;
 
 pub use imp::MONITOR_TIMESTAMP_CAPS;
+/// A mapped video frame as the GStreamer-free frame code sees it, for tools that
+/// read frames the way the element does (the capture tool's monitor light).
+pub use video::frame_view;
 
 glib::wrapper! {
     pub struct LsydRelight(ObjectSubclass<imp::LsydRelight>) @extends gst_base::Aggregator, gst::Element, gst::Object;

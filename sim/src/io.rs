@@ -70,6 +70,11 @@ npy_element!(f64, "<f8");
 npy_element!(i64, "<i8");
 
 fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
+    npy_header_at_least(descr, shape, 0)
+}
+
+/// The header, padded to at least `min_len` bytes (and a multiple of 64).
+fn npy_header_at_least(descr: &str, shape: &[usize], min_len: usize) -> Vec<u8> {
     let dims: Vec<String> = shape.iter().map(|d| d.to_string()).collect();
     let shape_txt = if shape.len() == 1 {
         format!("({},)", dims[0])
@@ -80,7 +85,7 @@ fn npy_header(descr: &str, shape: &[usize]) -> Vec<u8> {
         format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape_txt}, }}");
     // Magic (6) + version (2) + length (2) + dict + newline, padded to 64 bytes.
     let total = 10 + dict.len() + 1;
-    dict.push_str(&" ".repeat(total.div_ceil(64) * 64 - total));
+    dict.push_str(&" ".repeat(total.max(min_len).div_ceil(64) * 64 - total));
     dict.push('\n');
     let mut h = b"\x93NUMPY\x01\x00".to_vec();
     h.extend_from_slice(&(dict.len() as u16).to_le_bytes());
@@ -124,6 +129,68 @@ impl<T: NpyElement> NpyWriter<T> {
             )));
         }
         self.out.flush()
+    }
+}
+
+/// Streams an array whose first axis grows until it is finished, row by row
+/// (a row being `row_shape`): the header, written first with room for any
+/// length, is rewritten with the final length by [`GrowingNpyWriter::finish`].
+pub struct GrowingNpyWriter<T: NpyElement> {
+    out: BufWriter<File>,
+    row_shape: Vec<usize>,
+    rows: usize,
+    header_len: usize,
+    _t: std::marker::PhantomData<T>,
+}
+
+impl<T: NpyElement> GrowingNpyWriter<T> {
+    pub fn create(path: &Path, row_shape: &[usize]) -> io::Result<Self> {
+        let mut out = BufWriter::new(File::create(path)?);
+        let header = Self::header(row_shape, usize::MAX, 0);
+        out.write_all(&header)?;
+        Ok(Self {
+            out,
+            row_shape: row_shape.to_vec(),
+            rows: 0,
+            header_len: header.len(),
+            _t: std::marker::PhantomData,
+        })
+    }
+
+    fn header(row_shape: &[usize], rows: usize, min_len: usize) -> Vec<u8> {
+        let shape: Vec<usize> = std::iter::once(rows)
+            .chain(row_shape.iter().copied())
+            .collect();
+        npy_header_at_least(T::DESCR, &shape, min_len)
+    }
+
+    /// Appends one row of `row_shape`'s size.
+    pub fn append(&mut self, row: &[T]) -> io::Result<()> {
+        if row.len() != self.row_shape.iter().product::<usize>() {
+            return Err(io::Error::other(format!(
+                "a row of {} values is not of shape {:?}",
+                row.len(),
+                self.row_shape
+            )));
+        }
+        self.rows += 1;
+        T::write_le(row, &mut self.out)
+    }
+
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// Writes the final length into the header and flushes.
+    pub fn finish(mut self) -> io::Result<()> {
+        use std::io::{Seek, SeekFrom};
+        self.out.flush()?;
+        let header = Self::header(&self.row_shape, self.rows, self.header_len);
+        debug_assert_eq!(header.len(), self.header_len);
+        let mut file = self.out.into_inner().map_err(|e| e.into_error())?;
+        file.seek(SeekFrom::Start(0))?;
+        file.write_all(&header)?;
+        file.sync_all()
     }
 }
 
@@ -389,6 +456,23 @@ impl Y4mReader {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_growing_array_reads_back_with_its_final_length() {
+        let dir = std::env::temp_dir().join(format!("deskstage-growing-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("a.npy");
+        let mut w = GrowingNpyWriter::<f64>::create(&path, &[2]).unwrap();
+        for i in 0..3 {
+            w.append(&[i as f64, -(i as f64)]).unwrap();
+        }
+        assert!(w.append(&[1.0]).is_err());
+        w.finish().unwrap();
+        let (shape, values) = read_npy::<f64>(&path).unwrap();
+        assert_eq!(shape, [3, 2]);
+        assert_eq!(values, [0.0, -0.0, 1.0, -1.0, 2.0, -2.0]);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn npy_round_trip() {

@@ -15,6 +15,7 @@
 //! - [`render`]: per-pose light transport ([`render::Transport`]) and the webcam ([`render::Sensor`]).
 //! - [`motion`]: pose, expression and presence over time.
 //! - [`dataset`]: training captures, the held-out set and test recordings, on disk.
+//! - [`webcam`]: a live webcam filming the person lit by given screen frames.
 
 pub mod content;
 pub mod dataset;
@@ -29,3 +30,4 @@ pub mod raster;
 pub mod render;
 pub mod rng;
 pub mod subject;
+pub mod webcam;

@@ -1,0 +1,603 @@
+//! What the user is told while recording, measured from the data: how many
+//! camera frames are usable for training, how much of the face's light comes
+//! from the monitor rather than the room, whether the face is in view, whether
+//! pose and expression vary, and which head poses the session has covered.
+//! GStreamer-free: the capture feeds it camera and screen observations in
+//! running time, in any interleaving of the two streams.
+
+use std::collections::VecDeque;
+
+use serde::Serialize;
+
+/// Smallest face worth training on, in pixels of face-box height: below it the
+/// network's 256-pixel crop (2.9 face heights) is upsampled more than about 1.8x.
+pub const MIN_FACE_HEIGHT: f32 = 48.0;
+/// Without a face for this long, the user is told.
+pub const FACE_LOST_SECONDS: f64 = 1.0;
+/// The monitor's share of the face's light is measured over this much recent time.
+pub const SHARE_WINDOW_SECONDS: f64 = 10.0;
+/// The share is judged once this much of the window is filled.
+pub const MIN_SHARE_SECONDS: f64 = 3.0;
+/// Below this share the room light overpowers the monitor.
+pub const MIN_MONITOR_SHARE: f64 = 0.4;
+/// Screen luminance must vary at least this much (standard deviation, linear)
+/// over the window for the share to be measurable.
+pub const MIN_SCREEN_VARIATION: f64 = 0.01;
+/// Pose and expression variation is judged over this much recent time.
+pub const MOTION_WINDOW_SECONDS: f64 = 4.0;
+/// Below this keypoint spread (summed standard deviations of face-relative
+/// keypoint positions) pose and expression count as barely varying.
+pub const MIN_KEYPOINT_SPREAD: f64 = 0.06;
+/// A warning that still holds is repeated after this long.
+pub const REPEAT_SECONDS: f64 = 30.0;
+/// Head-turn bins (nose offset from the eyes' midpoint, in face widths) and
+/// head-tilt bins (the nose's place between eyes and mouth, 0 at the eyes).
+const YAW_EDGES: [f64; 4] = [-0.12, -0.04, 0.04, 0.12];
+const PITCH_EDGES: [f64; 2] = [0.45, 0.6];
+pub const POSE_BINS: usize = (YAW_EDGES.len() + 1) * (PITCH_EDGES.len() + 1);
+
+/// The face the detector found in a camera frame, in the frame's pixels.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Face {
+    pub width: f32,
+    pub height: f32,
+    /// Right eye, left eye, nose tip, mouth centre (BlazeFace's first four keypoints).
+    pub eyes: [[f32; 2]; 2],
+    pub nose: [f32; 2],
+    pub mouth: [f32; 2],
+    /// Mean linear luminance of the face's inner region.
+    pub luminance: f64,
+}
+
+impl Face {
+    /// Head turn and tilt proxies and mouth opening, in face sizes.
+    fn descriptor(&self) -> [f64; 3] {
+        let mid = [
+            (self.eyes[0][0] + self.eyes[1][0]) / 2.0,
+            (self.eyes[0][1] + self.eyes[1][1]) / 2.0,
+        ];
+        let eyes_to_mouth = (self.mouth[1] - mid[1]).max(1.0);
+        [
+            ((self.nose[0] - mid[0]) / self.width.max(1.0)) as f64,
+            ((self.nose[1] - mid[1]) / eyes_to_mouth) as f64,
+            ((self.mouth[1] - self.nose[1]) / self.height.max(1.0)) as f64,
+        ]
+    }
+
+    fn pose_bin(&self) -> usize {
+        let [yaw, pitch, _] = self.descriptor();
+        let yaw_bin = YAW_EDGES.iter().filter(|&&e| yaw > e).count();
+        let pitch_bin = PITCH_EDGES.iter().filter(|&&e| pitch > e).count();
+        pitch_bin * (YAW_EDGES.len() + 1) + yaw_bin
+    }
+}
+
+/// Something the user should do something about, said once when it starts
+/// (and again every [`REPEAT_SECONDS`] while it lasts).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Warning {
+    /// Running time, seconds.
+    pub at: f64,
+    pub kind: WarningKind,
+    pub message: String,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WarningKind {
+    RoomOverpowersMonitor,
+    FaceLost,
+    PoseFrozen,
+}
+
+/// A camera frame waiting for the screen frames around it.
+struct Pending {
+    t: f64,
+    face: Option<Face>,
+}
+
+/// The measures so far, for the status line and the session's summary.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Summary {
+    pub camera_frames: u64,
+    pub usable_frames: u64,
+    pub frames_with_face: u64,
+    /// The monitor's share of the face's light over the last [`SHARE_WINDOW_SECONDS`],
+    /// when measurable.
+    pub monitor_share_recent: Option<f64>,
+    /// Over the whole session.
+    pub monitor_share: Option<f64>,
+    /// Keypoint spread over the last [`MOTION_WINDOW_SECONDS`].
+    pub keypoint_spread_recent: Option<f64>,
+    pub pose_bins_covered: usize,
+    pub pose_bins: usize,
+    /// Frames per pose bin: rows are head tilt (up to down), columns head turn.
+    pub pose_bin_frames: Vec<Vec<u64>>,
+    /// Seconds without a face in view, in total.
+    pub face_lost_seconds: f64,
+    pub warnings: Vec<Warning>,
+}
+
+#[derive(Default)]
+pub struct Guidance {
+    /// Screen frames' (time, mean linear luminance), oldest first, the last
+    /// [`SHARE_WINDOW_SECONDS`] and a little more.
+    screen: VecDeque<(f64, f64)>,
+    /// Last screen frame time seen.
+    screen_latest: Option<f64>,
+    pending: VecDeque<Pending>,
+    /// (time, screen luminance, face luminance) of recent usable frames.
+    pairs: VecDeque<(f64, f64, f64)>,
+    /// Sums for the whole session's regression: n, Σx, Σy, Σxx, Σxy.
+    totals: [f64; 5],
+    /// (time, descriptor) of recent frames with a face.
+    descriptors: VecDeque<(f64, [f64; 3])>,
+    last_face: Option<f64>,
+    first_frame: Option<f64>,
+    last_frame: Option<f64>,
+    summary: Summary,
+    /// When each warning kind was last given; None while its condition is clear.
+    warned: [Option<f64>; 3],
+    new_warnings: Vec<Warning>,
+}
+
+fn kind_index(k: WarningKind) -> usize {
+    match k {
+        WarningKind::RoomOverpowersMonitor => 0,
+        WarningKind::FaceLost => 1,
+        WarningKind::PoseFrozen => 2,
+    }
+}
+
+impl Guidance {
+    pub fn new() -> Guidance {
+        Guidance {
+            summary: Summary {
+                pose_bins: POSE_BINS,
+                pose_bin_frames: vec![vec![0; YAW_EDGES.len() + 1]; PITCH_EDGES.len() + 1],
+                ..Summary::default()
+            },
+            ..Guidance::default()
+        }
+    }
+
+    /// A screen frame shown at `t` seconds with mean linear luminance `luminance`.
+    pub fn screen(&mut self, t: f64, luminance: f64) {
+        self.screen.push_back((t, luminance));
+        self.screen_latest = Some(self.screen_latest.map_or(t, |l| l.max(t)));
+        while self
+            .screen
+            .get(1)
+            .is_some_and(|&(t1, _)| t1 < t - SHARE_WINDOW_SECONDS - 1.0)
+        {
+            self.screen.pop_front();
+        }
+        self.resolve(false);
+    }
+
+    /// A camera frame at `t` seconds, with the face found in it, if any.
+    pub fn camera(&mut self, t: f64, face: Option<Face>) {
+        self.pending.push_back(Pending { t, face });
+        self.resolve(false);
+    }
+
+    /// Every stream has ended: judge the frames still waiting with what is known.
+    pub fn finish(&mut self) {
+        self.resolve(true);
+        if let Some(end) = self.last_frame
+            && self.last_face != Some(end)
+        {
+            let gap = self.time_without_face(end);
+            if gap > FACE_LOST_SECONDS {
+                self.summary.face_lost_seconds += gap;
+            }
+        }
+    }
+
+    /// Seconds from the last frame with a face (or the first frame) to `t`.
+    fn time_without_face(&self, t: f64) -> f64 {
+        t - self.last_face.or(self.first_frame).unwrap_or(t)
+    }
+
+    /// Warnings raised since the last call.
+    pub fn take_warnings(&mut self) -> Vec<Warning> {
+        std::mem::take(&mut self.new_warnings)
+    }
+
+    pub fn summary(&self) -> &Summary {
+        &self.summary
+    }
+
+    /// Judges the camera frames whose light is known: a screen frame after
+    /// them has arrived (so the latest one at or before them is final), or
+    /// they have waited a second (the screen stalled), or the streams ended.
+    fn resolve(&mut self, all: bool) {
+        while let Some(p) = self.pending.front() {
+            let known = self.screen_latest.is_some_and(|s| s > p.t);
+            let newest = self.pending.back().map_or(p.t, |b| b.t);
+            if !(all || known || newest - p.t > 1.0) {
+                break;
+            }
+            let p = self.pending.pop_front().expect("checked above");
+            self.judge(p);
+        }
+    }
+
+    /// Screen luminance of the latest screen frame at or before `t`.
+    fn screen_at(&self, t: f64) -> Option<f64> {
+        self.screen
+            .iter()
+            .rev()
+            .find(|&&(ts, _)| ts <= t)
+            .map(|&(_, l)| l)
+    }
+
+    fn judge(&mut self, p: Pending) {
+        let t = p.t;
+        self.summary.camera_frames += 1;
+        self.first_frame.get_or_insert(t);
+        self.last_frame = Some(t);
+        let light = self.screen_at(t);
+        match p.face {
+            Some(face) => {
+                let gap = self.time_without_face(t);
+                self.last_face = Some(t);
+                self.clear(WarningKind::FaceLost);
+                let s = &mut self.summary;
+                s.frames_with_face += 1;
+                if gap > FACE_LOST_SECONDS {
+                    s.face_lost_seconds += gap;
+                    // Motion is judged within a stretch of the face in view.
+                    self.descriptors.clear();
+                }
+                let usable = face.height >= MIN_FACE_HEIGHT;
+                if usable {
+                    let bin = face.pose_bin();
+                    let cols = YAW_EDGES.len() + 1;
+                    s.pose_bin_frames[bin / cols][bin % cols] += 1;
+                }
+                if let (true, Some(screen)) = (usable, light) {
+                    s.usable_frames += 1;
+                    let y = face.luminance;
+                    self.pairs.push_back((t, screen, y));
+                    let x = screen;
+                    for (total, v) in self.totals.iter_mut().zip([1.0, x, y, x * x, x * y]) {
+                        *total += v;
+                    }
+                }
+                self.descriptors.push_back((t, face.descriptor()));
+            }
+            None => {
+                let gap = self.time_without_face(t);
+                if gap > FACE_LOST_SECONDS {
+                    self.warn(
+                        t,
+                        WarningKind::FaceLost,
+                        format!(
+                            "no face for {gap:.1} s: sit facing the camera, your whole face in view"
+                        ),
+                    );
+                }
+            }
+        }
+        while self
+            .pairs
+            .front()
+            .is_some_and(|&(tp, _, _)| tp < t - SHARE_WINDOW_SECONDS)
+        {
+            self.pairs.pop_front();
+        }
+        while self
+            .descriptors
+            .front()
+            .is_some_and(|&(td, _)| td < t - MOTION_WINDOW_SECONDS)
+        {
+            self.descriptors.pop_front();
+        }
+        self.measure_share(t);
+        self.measure_motion(t);
+        let s = &mut self.summary;
+        s.pose_bins_covered = s
+            .pose_bin_frames
+            .iter()
+            .flatten()
+            .filter(|&&n| n > 0)
+            .count();
+    }
+
+    fn measure_share(&mut self, t: f64) {
+        let [n, sx, sy, sxx, sxy] = self.pairs.iter().fold([0.0; 5], |acc, &(_, x, y)| {
+            [
+                acc[0] + 1.0,
+                acc[1] + x,
+                acc[2] + y,
+                acc[3] + x * x,
+                acc[4] + x * y,
+            ]
+        });
+        let recent = monitor_share(n, sx, sy, sxx, sxy);
+        let [n, sx, sy, sxx, sxy] = self.totals;
+        self.summary.monitor_share = monitor_share(n, sx, sy, sxx, sxy);
+        self.summary.monitor_share_recent = recent;
+        // Judged once the window is full, so a first noisy second does not warn.
+        let span = self.pairs.front().map_or(0.0, |&(t0, _, _)| t - t0);
+        match recent {
+            Some(share) if share < MIN_MONITOR_SHARE && span >= MIN_SHARE_SECONDS => self.warn(
+                t,
+                WarningKind::RoomOverpowersMonitor,
+                format!(
+                    "the monitor gives only {:.0} % of the light on your face: the room \
+                         overpowers it; dim the room lights or close the curtains, and turn \
+                         the monitor's brightness up",
+                    share * 100.0
+                ),
+            ),
+            Some(_) => self.clear(WarningKind::RoomOverpowersMonitor),
+            None => {}
+        }
+    }
+
+    /// Judged on frames with a face only: a face out of view is the face-lost
+    /// warning's business, not a still pose.
+    fn measure_motion(&mut self, t: f64) {
+        let n = self.descriptors.len();
+        if self.last_face != Some(t) {
+            return;
+        }
+        let span = self.descriptors.front().map_or(0.0, |&(t0, _)| t - t0);
+        if n < 5 || span < MOTION_WINDOW_SECONDS * 0.8 {
+            self.summary.keypoint_spread_recent = None;
+            return;
+        }
+        let spread: f64 = (0..3)
+            .map(|k| {
+                let mean = self.descriptors.iter().map(|(_, d)| d[k]).sum::<f64>() / n as f64;
+                let var = self
+                    .descriptors
+                    .iter()
+                    .map(|(_, d)| (d[k] - mean).powi(2))
+                    .sum::<f64>()
+                    / n as f64;
+                var.sqrt()
+            })
+            .sum();
+        self.summary.keypoint_spread_recent = Some(spread);
+        if spread < MIN_KEYPOINT_SPREAD {
+            self.warn(
+                t,
+                WarningKind::PoseFrozen,
+                format!(
+                    "your pose and expression have barely changed for {MOTION_WINDOW_SECONDS:.0} s: \
+                     turn and tilt your head, talk, smile, look around the screen"
+                ),
+            );
+        } else {
+            self.clear(WarningKind::PoseFrozen);
+        }
+    }
+
+    fn warn(&mut self, t: f64, kind: WarningKind, message: String) {
+        let last = &mut self.warned[kind_index(kind)];
+        if last.is_some_and(|l| t - l < REPEAT_SECONDS) {
+            return;
+        }
+        *last = Some(t);
+        let w = Warning {
+            at: t,
+            kind,
+            message,
+        };
+        self.summary.warnings.push(w.clone());
+        self.new_warnings.push(w);
+    }
+
+    fn clear(&mut self, kind: WarningKind) {
+        self.warned[kind_index(kind)] = None;
+    }
+}
+
+/// The monitor's share of the face's light from a regression of face luminance
+/// on screen luminance (sums of n pairs): the part of the face's mean that
+/// follows the screen, slope × mean screen / mean face, in [0, 1]. None when
+/// the screen's brightness has not varied enough to tell.
+fn monitor_share(n: f64, sx: f64, sy: f64, sxx: f64, sxy: f64) -> Option<f64> {
+    if n < 10.0 {
+        return None;
+    }
+    let (mx, my) = (sx / n, sy / n);
+    let var_x = sxx / n - mx * mx;
+    if var_x.max(0.0).sqrt() < MIN_SCREEN_VARIATION || my <= 0.0 {
+        return None;
+    }
+    let slope = (sxy / n - mx * my) / var_x;
+    Some((slope * mx / my).clamp(0.0, 1.0))
+}
+
+/// Mean linear luminance (Rec. 709 weights) of the inner part of a face box
+/// (the middle half of its width, from 20 % to 80 % of its height), in a
+/// packed 8-bit sRGB frame: skin, not hair or background.
+pub fn face_luminance(
+    rgb: &[u8],
+    stride: usize,
+    width: usize,
+    height: usize,
+    centre: [f32; 2],
+    size: [f32; 2],
+) -> f64 {
+    let decode: [f64; 256] = std::array::from_fn(|i| {
+        let v = i as f64 / 255.0;
+        if v <= 0.04045 {
+            v / 12.92
+        } else {
+            ((v + 0.055) / 1.055).powf(2.4)
+        }
+    });
+    let span = |c: f32, half: f32, extent: usize| {
+        let a = (c - half).max(0.0) as usize;
+        let b = ((c + half).max(0.0) as usize).min(extent);
+        a..b
+    };
+    let xs = span(centre[0], size[0] / 4.0, width);
+    let ys = span(centre[1], size[1] * 0.3, height);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for y in ys {
+        let row = &rgb[y * stride..];
+        for x in xs.clone() {
+            let p = &row[x * 3..x * 3 + 3];
+            sum += 0.2126 * decode[p[0] as usize]
+                + 0.7152 * decode[p[1] as usize]
+                + 0.0722 * decode[p[2] as usize];
+            n += 1;
+        }
+    }
+    if n == 0 { 0.0 } else { sum / n as f64 }
+}
+
+/// Mean linear luminance of a monitor light (planar linear RGB, cells equal in area).
+pub fn light_luminance(planar_rgb: &[f32]) -> f64 {
+    let n = planar_rgb.len() / 3;
+    let mean = |c: usize| {
+        planar_rgb[c * n..(c + 1) * n]
+            .iter()
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / n.max(1) as f64
+    };
+    0.2126 * mean(0) + 0.7152 * mean(1) + 0.0722 * mean(2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A frontal face `size` pixels high, turned by `turn` (nose offset in face
+    /// widths), with luminance `luminance`.
+    fn face(size: f32, turn: f32, luminance: f64) -> Face {
+        Face {
+            width: size,
+            height: size,
+            eyes: [[100.0 - 0.2 * size, 100.0], [100.0 + 0.2 * size, 100.0]],
+            nose: [100.0 + turn * size, 100.0 + 0.15 * size],
+            mouth: [100.0, 100.0 + 0.3 * size],
+            luminance,
+        }
+    }
+
+    /// A screen that alternates between dark and bright every 0.5 s, its frames
+    /// at 30 fps, and a camera at 10 fps whose face is lit by `room` plus the screen.
+    fn run(seconds: f64, room: f64, face_at: impl Fn(f64) -> Option<(f32, f32)>) -> Guidance {
+        let mut g = Guidance::new();
+        let screen = |t: f64| if (t * 2.0) as i64 % 2 == 0 { 0.1 } else { 0.6 };
+        for i in 0..(seconds * 30.0) as usize {
+            let t = i as f64 / 30.0;
+            g.screen(t, screen(t));
+            if i % 3 == 0 {
+                let f = face_at(t).map(|(size, turn)| face(size, turn, 0.5 * (room + screen(t))));
+                g.camera(t, f);
+            }
+        }
+        g.finish();
+        g
+    }
+
+    fn kinds(g: &Guidance) -> Vec<WarningKind> {
+        g.summary().warnings.iter().map(|w| w.kind).collect()
+    }
+
+    /// Head turning back and forth, a full cycle every 4 s.
+    fn moving(t: f64) -> Option<(f32, f32)> {
+        Some((80.0, 0.15 * (t * std::f64::consts::TAU / 4.0).sin() as f32))
+    }
+
+    #[test]
+    fn a_good_capture_counts_usable_frames_and_warns_of_nothing() {
+        let g = run(12.0, 0.05, moving);
+        let s = g.summary();
+        assert_eq!(s.camera_frames, 120);
+        assert_eq!(s.usable_frames, 120);
+        assert!(kinds(&g).is_empty(), "{:?}", s.warnings);
+        // The face is 0.05 room + screen: the screen's share is mean screen / (0.05 + mean screen).
+        let want = 0.35 / 0.4;
+        let share = s.monitor_share.unwrap();
+        assert!((share - want).abs() < 0.02, "{share} vs {want}");
+        assert!(s.pose_bins_covered >= 3, "{:?}", s.pose_bin_frames);
+    }
+
+    #[test]
+    fn a_bright_room_is_reported_with_the_measured_share() {
+        let g = run(12.0, 2.0, moving);
+        assert_eq!(kinds(&g), [WarningKind::RoomOverpowersMonitor]);
+        let share = g.summary().monitor_share.unwrap();
+        assert!((share - 0.35 / 2.35).abs() < 0.02, "{share}");
+        assert!(g.summary().warnings[0].message.contains("15 %"));
+    }
+
+    #[test]
+    fn a_face_that_leaves_is_reported_once_per_absence() {
+        let g = run(12.0, 0.05, |t| {
+            if (4.0..7.0).contains(&t) {
+                None
+            } else {
+                moving(t)
+            }
+        });
+        assert_eq!(kinds(&g), [WarningKind::FaceLost]);
+        let w = &g.summary().warnings[0];
+        assert!(w.at > 4.85 && w.at < 5.3, "{w:?}");
+        let lost = g.summary().face_lost_seconds;
+        assert!((lost - 3.1).abs() < 0.01, "{lost}");
+        assert_eq!(g.summary().usable_frames, 90);
+    }
+
+    #[test]
+    fn a_face_gone_for_good_is_not_a_frozen_pose() {
+        let g = run(12.0, 0.05, |t| if t < 3.0 { moving(t) } else { None });
+        assert_eq!(kinds(&g), [WarningKind::FaceLost]);
+    }
+
+    #[test]
+    fn a_frozen_pose_is_reported_and_small_faces_are_not_usable() {
+        let g = run(12.0, 0.05, |_| Some((30.0, 0.0)));
+        assert_eq!(kinds(&g), [WarningKind::PoseFrozen]);
+        assert_eq!(g.summary().usable_frames, 0);
+        assert_eq!(g.summary().frames_with_face, 120);
+    }
+
+    #[test]
+    fn a_steady_screen_leaves_the_share_unknown() {
+        let mut g = Guidance::new();
+        for i in 0..100 {
+            let t = i as f64 / 10.0;
+            g.screen(t, 0.3);
+            g.camera(t, Some(face(80.0, 0.0, 0.4)));
+        }
+        g.finish();
+        assert_eq!(g.summary().monitor_share, None);
+    }
+
+    #[test]
+    fn camera_frames_wait_for_the_screen_frame_after_them() {
+        let mut g = Guidance::new();
+        g.camera(0.05, Some(face(80.0, 0.0, 0.4)));
+        assert_eq!(g.summary().camera_frames, 0, "its light is not known yet");
+        g.screen(0.0, 0.2);
+        assert_eq!(g.summary().camera_frames, 0);
+        g.screen(0.1, 0.2);
+        assert_eq!(g.summary().usable_frames, 1);
+    }
+
+    #[test]
+    fn face_luminance_reads_the_inner_face_in_linear_light() {
+        // A 20x20 frame, mid-grey (sRGB 128 is linear 0.2158) inside, white outside.
+        let (w, h) = (20usize, 20usize);
+        let mut rgb = vec![255u8; w * h * 3];
+        for y in 5..15 {
+            for x in 5..15 {
+                rgb[(y * w + x) * 3..(y * w + x) * 3 + 3].fill(128);
+            }
+        }
+        let l = face_luminance(&rgb, w * 3, w, h, [10.0, 10.0], [16.0, 16.0]);
+        assert!((l - 0.2158).abs() < 1e-3, "{l}");
+        assert!((light_luminance(&[1.0; 6]) - 1.0).abs() < 1e-9);
+    }
+}
