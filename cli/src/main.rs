@@ -1,5 +1,5 @@
 //! `lsydrelight`, the project's command-line tool. One module per subcommand
-//! (`relight` now; `capture` and `train` to come), sharing the conventions in
+//! (`relight`, `train`; `capture` to come), sharing the conventions in
 //! [`exit`] (exit codes and error messages), [`interrupt`] (Ctrl-C),
 //! [`partial`] (outputs renamed into place only when complete) and
 //! [`progress`] (progress bars).
@@ -9,6 +9,7 @@ mod interrupt;
 mod partial;
 mod progress;
 mod relight;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -27,6 +28,7 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     Relight(relight::Args),
+    Train(train::Args),
 }
 
 fn main() -> exit::Status {
@@ -42,5 +44,6 @@ fn main() -> exit::Status {
     interrupt::install();
     match cli.command {
         Command::Relight(args) => relight::run(args, cli.quiet),
+        Command::Train(args) => train::run(args, cli.quiet),
     }
 }
