@@ -182,6 +182,9 @@ fn train_makes_a_model_the_element_relights_with() {
         "32",
         "--device",
         "cpu",
+        // One thread: on a machine shared with other work, two contend for little gain.
+        "--threads",
+        "1",
         "--steps",
         "20",
     ]);

@@ -37,7 +37,7 @@ use python::{Ended, Trainer};
 #[command(
     override_usage = "lsydrelight train --capture DIR [--capture DIR ...] --out MODEL_DIR \
         [--from DIR | --scratch [--resolution N]] [--steps N] [--offset SECONDS] [--fps N] \
-        [--device auto|cpu|cuda]",
+        [--device auto|cpu|cuda] [--threads N]",
     long_about = "Train a personal model from capture folders: prepare, pair, fine-tune, export, \
         check, evaluate.\n\n\
         Reads the folders `lsydrelight capture` wrote, finds and crops your face in every camera \
@@ -103,13 +103,19 @@ pub struct Args {
     #[arg(long, value_name = "DEVICE", default_value = "auto",
           value_parser = ["auto", "cpu", "cuda"])]
     device: String,
+
+    /// CPU threads for training and evaluation; 0 uses every core (fewer can be faster on a
+    /// machine busy with other work)
+    #[arg(long, value_name = "N", default_value_t = 0,
+          value_parser = clap::value_parser!(u32).range(0..=256))]
+    threads: u32,
 }
 
 fn resolution(s: &str) -> Result<u32, String> {
     let v: u32 = s
         .parse()
         .map_err(|_| format!("`{s}` is not a whole number"))?;
-    if v >= 16 && v % 16 == 0 && v <= 512 {
+    if (16..=512).contains(&v) && v.is_multiple_of(16) {
         Ok(v)
     } else {
         Err(format!("{v} is not a multiple of 16 from 16 to 512"))
@@ -185,7 +191,7 @@ fn train(args: &Args, quiet: bool) -> Result<Status, Failure> {
             Some(network)
         }
     };
-    let trainer = Trainer::find(&checkout, quiet)?;
+    let trainer = Trainer::find(&checkout, quiet, args.threads)?;
     let work = out.join("training");
     std::fs::create_dir_all(&work)
         .map_err(|e| Failure::new(format!("cannot create {}: {e}", work.display())))?;
