@@ -36,7 +36,7 @@ pub fn install() {
     let installed = ctrlc::set_handler(|| {
         if PRESSES.fetch_add(1, Ordering::SeqCst) == 0 {
             eprintln!(
-                "\nstopping: finishing the output with what was done so far (Ctrl-C again to abort)"
+                "\nstopping: finishing cleanly and keeping what was done so far (Ctrl-C again to abort)"
             );
         } else {
             partial::remove_all();
