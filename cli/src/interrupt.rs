@@ -4,11 +4,31 @@
 //! done so far is kept and playable. A second aborts at once and removes the
 //! unfinished outputs.
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use crate::{exit, partial};
 
 static PRESSES: AtomicUsize = AtomicUsize::new(0);
+
+/// Process groups of the child programs running (the trainer's Python stages):
+/// each runs in its own group, so a terminal's Ctrl-C reaches only this program,
+/// which asks them to stop; an abort kills them.
+static CHILDREN: Mutex<Vec<i32>> = Mutex::new(Vec::new());
+
+fn children() -> std::sync::MutexGuard<'static, Vec<i32>> {
+    CHILDREN.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// A child program started in its own process group (`pgid`, its process id).
+pub fn add_child(pgid: i32) {
+    children().push(pgid);
+}
+
+/// The child has ended.
+pub fn remove_child(pgid: i32) {
+    children().retain(|&c| c != pgid);
+}
 
 pub fn install() {
     // ctrlc runs the handler on its own thread, not in the signal handler, so
@@ -16,10 +36,14 @@ pub fn install() {
     let installed = ctrlc::set_handler(|| {
         if PRESSES.fetch_add(1, Ordering::SeqCst) == 0 {
             eprintln!(
-                "\nstopping: finishing the output with what was done so far (Ctrl-C again to abort)"
+                "\nstopping: finishing cleanly and keeping what was done so far (Ctrl-C again to abort)"
             );
         } else {
             partial::remove_all();
+            for &pgid in children().iter() {
+                // SAFETY: kill takes no pointers; a group already gone is ESRCH, harmless.
+                unsafe { libc::kill(-pgid, libc::SIGKILL) };
+            }
             eprintln!("\naborted: unfinished outputs removed");
             // Not exit(): its atexit handlers tear down ONNX Runtime under the
             // pipelines' running threads, which then print errors or crash.

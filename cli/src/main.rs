@@ -1,5 +1,5 @@
 //! `lsydrelight`, the project's command-line tool. One module per subcommand
-//! (`relight`, `capture`; `train` to come), sharing the conventions in
+//! (`relight`, `capture`, `train`), sharing the conventions in
 //! [`exit`] (exit codes and error messages), [`interrupt`] (Ctrl-C),
 //! [`partial`] (outputs renamed into place only when complete) and
 //! [`progress`] (progress bars).
@@ -10,6 +10,7 @@ mod interrupt;
 mod partial;
 mod progress;
 mod relight;
+mod train;
 
 use clap::{Parser, Subcommand};
 
@@ -29,6 +30,7 @@ struct Cli {
 enum Command {
     Relight(relight::Args),
     Capture(capture::Args),
+    Train(train::Args),
 }
 
 fn main() -> exit::Status {
@@ -50,5 +52,6 @@ fn main() -> exit::Status {
     match cli.command {
         Command::Relight(args) => relight::run(args, cli.quiet),
         Command::Capture(args) => capture::run(args, cli.quiet),
+        Command::Train(args) => train::run(args, cli.quiet),
     }
 }

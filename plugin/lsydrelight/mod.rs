@@ -61,7 +61,7 @@ mod settings;
 mod side_stream;
 mod stats;
 mod target;
-mod video;
+pub mod video;
 
 pub use imp::MONITOR_TIMESTAMP_CAPS;
 /// A mapped video frame as the GStreamer-free frame code sees it, for tools that

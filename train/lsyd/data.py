@@ -32,31 +32,50 @@ def to_tensor(images: np.ndarray) -> torch.Tensor:
 
 @dataclasses.dataclass
 class Capture:
-    """One capture session as written by ``deskstage captures`` or ``import_capture``."""
+    """One capture session as written by ``deskstage captures`` or ``import_capture``
+    (the monitor frames, ``monitor.npy``), or by ``lsydrelight train`` from a capture folder
+    (the monitor's light grid of each frame, ``lights.npy``, (T, 3, 16, 32) float32)."""
 
     path: Path
     face: np.ndarray  # (T, S, S, 3) uint8, memory-mapped
-    monitor: np.ndarray  # (T, H, W, 3) uint8, memory-mapped
+    monitor: np.ndarray | None  # (T, H, W, 3) uint8, memory-mapped; None with lights.npy
     timestamps: np.ndarray
     keypoints: np.ndarray  # (T, 68, 2)
     truth: np.ndarray | None  # simulator only: never used for training
+    light_grid: np.ndarray | None = None  # (T, 3, 16, 32), from lights.npy
 
     @classmethod
     def load(cls, path: Path) -> Capture:
         truth = path / "truth.npy"
+        monitor = path / "monitor.npy"
         return cls(
             path=path,
             face=np.load(path / "face.npy", mmap_mode="r"),
-            monitor=np.load(path / "monitor.npy", mmap_mode="r"),
+            monitor=np.load(monitor, mmap_mode="r") if monitor.exists() else None,
             timestamps=np.load(path / "timestamps.npy"),
             keypoints=np.load(path / "keypoints.npy"),
             truth=np.load(truth) if truth.exists() else None,
+            light_grid=None if monitor.exists() else read_lights(path, len(np.load(path / "timestamps.npy"))),
         )
 
     def lights(self) -> np.ndarray:
+        if self.monitor is None:
+            return self.light_grid
         return np.concatenate(
             [contract.light_from_frames(self.monitor[i : i + 64]) for i in range(0, len(self.monitor), 64)]
         )
+
+
+def read_lights(session: Path, frames: int) -> np.ndarray:
+    """A session's ``lights.npy``, checked: one (3, 16, 32) float32 grid per frame."""
+    path = session / "lights.npy"
+    if not path.exists():
+        raise FileNotFoundError(f"{session}: neither monitor.npy nor lights.npy")
+    lights = np.load(path)
+    shape = (frames, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
+    if lights.dtype != np.float32 or lights.shape != shape:
+        raise ValueError(f"{path}: {lights.dtype} {lights.shape}, expected float32 {shape}")
+    return lights
 
 
 def capture_dirs(root: Path) -> list[Path]:
@@ -100,7 +119,8 @@ def _cached(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
     """A session's frames at network resolution and its lights, computed once and kept
     next to the capture (``cache-<resolution>.npz``)."""
     path = session / f"cache-{resolution}.npz"
-    source_time = max((session / n).stat().st_mtime for n in ("face.npy", "monitor.npy"))
+    sources = [session / n for n in ("face.npy", "monitor.npy", "lights.npy")]
+    source_time = max(p.stat().st_mtime for p in sources if p.exists())
     if path.exists() and path.stat().st_mtime >= source_time:
         with np.load(path) as z:
             return z["images"], z["lights"]

@@ -122,18 +122,25 @@ def reference_run(
 def export(run: Path, data_root: Path, out: Path) -> dict:
     net, cfg = load_network(run)
     check_exportable(cfg.net)
-    out.mkdir(parents=True, exist_ok=True)
-    specs = contract.stage_specs(cfg.net.resolution, cfg.net.widths)
-
     held = data.Heldout.load(data_root / "heldout")
-    res = cfg.net.resolution
-    image = data.to_tensor(data.area_resize(held.images[0, 0], res))[None]
+    image = data.to_tensor(data.area_resize(held.images[0, 0], cfg.net.resolution))[None]
     src = torch.from_numpy(held.lights[0])[None]
     tgt = torch.from_numpy(held.lights[4])[None]
+    return {"config": cfg, "parity": export_network(net, cfg.net, image, src, tgt, out)}
+
+
+def export_network(
+    net: model.LcfnNet, cfg: model.NetConfig, image: torch.Tensor, src: torch.Tensor, tgt: torch.Tensor, out: Path
+) -> dict[str, float]:
+    """Writes the network's stages to ``out``, traced on one real frame (``image`` [1,3,R,R]
+    lit by ``src``, relit to ``tgt``), and returns their parity with PyTorch (raises above
+    ``PARITY_TOLERANCE``). The manifest is the caller's."""
+    check_exportable(cfg)
+    out.mkdir(parents=True, exist_ok=True)
+    specs = contract.stage_specs(cfg.resolution, cfg.widths)
     ref = reference_run(net, image, src, tgt)
     write_stages(net, specs, out, ref)
-    report = parity(out, specs, ref)
-    return {"config": cfg, "parity": report}
+    return parity(out, specs, ref)
 
 
 def write_stages(net: model.LcfnNet, specs: dict, out: Path, ref: dict[str, np.ndarray], rewrite: bool = True) -> None:

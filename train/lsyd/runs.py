@@ -2,10 +2,23 @@
 the configuration it was trained with (``config.json``: ``TrainConfig``, with the loss
 weights ``LossWeights``), its trained network (``checkpoint.pt``), and ``hardware``, the
 name of a machine as run records and model cards give it.
+
+A saved network (``network.pt``) is a trained generator on its own, what fine-tuning starts
+from (``lsyd.train --init``, ``lsydrelight train --from``). It is a ``torch.save`` dict of
+plain types and tensors (``torch.load(..., weights_only=True)`` reads it):
+
+- ``format``: ``"lsydrelight-network"``, ``version``: ``NETWORK_VERSION`` (1);
+- ``net``: the ``model.NetConfig`` as a dict (arch, resolution, width, code_dim, delight,
+  light_prediction): what ``model.build`` needs to make the network the weights fit;
+- ``state_dict``: the generator's parameters and buffers (no discriminator, no optimiser);
+- ``source``: free-form provenance (the run, its steps, its loss weights).
+
+    python -m lsyd.runs save-network --run runs/starter --out models/starter/network.pt
 """
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import os
@@ -49,6 +62,8 @@ class TrainConfig:
     pairs: str = "keypoints"  # "keypoints", "exact" or "both"
     pairing: pairing.PairingRule = pairing.PairingRule()
     weights: LossWeights = LossWeights()
+    # A saved network (``network.pt``) the generator starts from instead of random weights.
+    init: str | None = None
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -64,6 +79,7 @@ class TrainConfig:
             pairs=d["pairs"],
             pairing=pairing.PairingRule(**d["pairing"]),
             weights=LossWeights(**d["weights"]),
+            init=d.get("init"),
         )
 
 
@@ -89,3 +105,84 @@ def hardware(device: torch.device) -> str:
     lines = info.read_text().splitlines() if info.exists() else []
     names = [ln.split(":", 1)[1].strip() for ln in lines if ln.startswith("model name")]
     return f"{names[0] if names else platform.machine()}, {os.cpu_count()} cores"
+
+
+NETWORK_FORMAT = "lsydrelight-network"
+NETWORK_VERSION = 1
+
+
+def save_network(net: torch.nn.Module, cfg: model.NetConfig, path: Path, source: dict) -> None:
+    """Writes ``net`` and the configuration it needs as a saved network (the module's doc)."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    saved = {
+        "format": NETWORK_FORMAT,
+        "version": NETWORK_VERSION,
+        "net": dataclasses.asdict(cfg),
+        "state_dict": {k: v.detach().cpu() for k, v in net.state_dict().items()},
+        "source": source,
+    }
+    tmp = path.with_name(path.name + ".tmp")
+    torch.save(saved, tmp)
+    os.replace(tmp, path)
+
+
+def read_network(path: Path, expected: model.NetConfig | None = None) -> tuple[model.NetConfig, dict]:
+    """A saved network's configuration and weights. Raises ``ValueError`` naming what is wrong:
+    not a saved network, an unknown version, or (with ``expected``) a configuration that differs."""
+    if not path.is_file():
+        raise ValueError(f"{path}: no such saved network (network.pt)")
+    try:
+        saved = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # torch raises many kinds for a file that is not its own
+        raise ValueError(f"{path}: not a saved network: {e}") from e
+    if not isinstance(saved, dict) or saved.get("format") != NETWORK_FORMAT:
+        raise ValueError(f"{path}: not a saved network (no format {NETWORK_FORMAT!r})")
+    if saved.get("version") != NETWORK_VERSION:
+        raise ValueError(
+            f"{path}: saved network version {saved.get('version')}, this trainer reads version {NETWORK_VERSION}"
+        )
+    cfg = model.NetConfig(**saved["net"])
+    if expected is not None and cfg != expected:
+        diff = {k: (v, getattr(expected, k)) for k, v in dataclasses.asdict(cfg).items() if getattr(expected, k) != v}
+        raise ValueError(
+            f"{path}: the saved network's configuration differs from the one asked for "
+            + ", ".join(f"{k}: saved {a!r}, asked {b!r}" for k, (a, b) in diff.items())
+        )
+    net = model.build(cfg)
+    try:
+        net.load_state_dict(saved["state_dict"])
+    except RuntimeError as e:
+        raise ValueError(f"{path}: the weights do not fit the network {cfg}: {e}") from e
+    return cfg, saved["state_dict"]
+
+
+def load_saved_network(path: Path) -> tuple[torch.nn.Module, model.NetConfig]:
+    """A saved network, built and in evaluation mode."""
+    cfg, state = read_network(path)
+    net = model.build(cfg)
+    net.load_state_dict(state)
+    return net.eval(), cfg
+
+
+def save_run_network(run: Path, out: Path) -> model.NetConfig:
+    """The trained network of a run folder as a saved network."""
+    net, cfg = load_network(run)
+    steps = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)["step"]
+    source = {"run": run.name, "steps": steps, "of_steps": cfg.steps, "losses": dataclasses.asdict(cfg.weights)}
+    save_network(net, cfg.net, out, source)
+    return cfg.net
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description="Run folders and saved networks.")
+    sub = p.add_subparsers(dest="command", required=True)
+    save = sub.add_parser("save-network", help="write a run's trained network as network.pt")
+    save.add_argument("--run", type=Path, required=True, help="run folder written by lsyd.train")
+    save.add_argument("--out", type=Path, required=True, help="the network.pt to write")
+    a = p.parse_args()
+    cfg = save_run_network(a.run, a.out)
+    print(f"saved {a.out}: {cfg}")
+
+
+if __name__ == "__main__":
+    main()

@@ -6,7 +6,11 @@ Pairs come from facial keypoints within each capture session (as on real
 captures), optionally joined by the simulator's exact pairs. Training is
 seeded and resumable: a checkpoint is written every ``--checkpoint-every``
 steps, and ``--resume`` continues from it to the same final weights as an
-uninterrupted run of the same command on the same machine.
+uninterrupted run of the same command on the same machine. Ctrl-C saves a checkpoint
+at the step reached, so ``--resume`` continues from there.
+
+``--init models/starter/network.pt`` fine-tunes a saved network (``lsyd.runs``) instead
+of starting from random weights; the network's configuration comes from the file.
 """
 
 from __future__ import annotations
@@ -25,7 +29,7 @@ import torch.nn.functional as F
 from tqdm import tqdm
 
 from . import data, losses, model, pairing
-from .runs import LossWeights, TrainConfig, hardware, read_config
+from .runs import LossWeights, TrainConfig, hardware, read_config, read_network
 
 
 def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
@@ -61,7 +65,13 @@ class Trainer:
             raise ValueError("the de-lit consistency loss needs the LCFN network with de-lighting")
         torch.manual_seed(cfg.seed)
         # channels_last runs the small convolutions about 1.5x faster on CPU (oneDNN).
-        self.net = model.build(cfg.net).to(device, memory_format=torch.channels_last)
+        self.net = model.build(cfg.net)
+        if cfg.init:
+            try:
+                self.net.load_state_dict(read_network(Path(cfg.init), expected=cfg.net)[1])
+            except ValueError as e:
+                raise SystemExit(str(e)) from e
+        self.net = self.net.to(device, memory_format=torch.channels_last)
         self.disc = losses.PatchDiscriminator().to(device, memory_format=torch.channels_last)
         self.opt_g = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
         self.opt_d = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
@@ -200,16 +210,24 @@ def train(
         bar = tqdm(total=cfg.steps, initial=trainer.step, desc=run.name, unit="step")
         start = time.time()
         end = min(cfg.steps, stop_at) if stop_at else cfg.steps
-        while trainer.step < end:
-            idx = torch.randint(len(pairs.pairs), (cfg.batch,), generator=trainer.sampler)
-            terms = trainer.train_step(pairs.batch(idx))
-            bar.update(1)
-            if trainer.step % 20 == 0 or trainer.step == cfg.steps:
-                bar.set_postfix(l1=f"{terms['l1']:.4f}", g=f"{terms['g']:.3f}")
-                log.writerow({"step": trainer.step, "seconds": round(time.time() - start, 1), **terms})
-                f.flush()
-            if trainer.step % checkpoint_every == 0 or trainer.step == end:
-                trainer.save()
+        try:
+            while trainer.step < end:
+                idx = torch.randint(len(pairs.pairs), (cfg.batch,), generator=trainer.sampler)
+                terms = trainer.train_step(pairs.batch(idx))
+                bar.update(1)
+                if trainer.step % 20 == 0 or trainer.step == cfg.steps:
+                    bar.set_postfix(l1=f"{terms['l1']:.4f}", g=f"{terms['g']:.3f}")
+                    log.writerow({"step": trainer.step, "seconds": round(time.time() - start, 1), **terms})
+                    f.flush()
+                if trainer.step % checkpoint_every == 0 or trainer.step == end:
+                    trainer.save()
+        except KeyboardInterrupt:
+            # The step in progress is dropped whole: the state saved is after the last full step.
+            bar.close()
+            trainer.save()
+            record_session(run, device, session_start, trainer.step, time.time() - start)
+            print(f"interrupted at step {trainer.step} of {cfg.steps}; checkpoint {ckpt}, --resume continues")
+            raise
         bar.close()
     record_session(run, device, session_start, trainer.step, time.time() - start)
     print(f"trained {trainer.step} of {cfg.steps} steps; checkpoint {ckpt}")
@@ -231,13 +249,36 @@ def record_session(run: Path, device: torch.device, first: int, last: int, secon
     path.write_text(json.dumps(sessions, indent=2) + "\n")
 
 
+def init_config(
+    path: Path, arch: str | None, resolution: int | None, width: float | None, no_delight: bool, no_light: bool
+) -> model.NetConfig:
+    """The configuration of the saved network at ``path``; options given on the command line
+    must agree with it (the weights fit only the network they were trained in)."""
+    try:
+        cfg, _ = read_network(path)
+    except ValueError as e:
+        raise SystemExit(str(e)) from e
+    asked = {"arch": arch, "resolution": resolution, "width": width}
+    asked |= {"delight": False} if no_delight else {}
+    asked |= {"light_prediction": False} if no_light else {}
+    wrong = [
+        f"--{k.replace('_', '-')} {v} (the network has {getattr(cfg, k)})"
+        for k, v in asked.items()
+        if v is not None and v != getattr(cfg, k)
+    ]
+    if wrong:
+        raise SystemExit(f"--init {path}: the saved network's configuration differs: {'; '.join(wrong)}")
+    return cfg
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=Path("data"))
     p.add_argument("--out", type=Path, required=True, help="run folder: config, checkpoint, log")
-    p.add_argument("--arch", default="lcfn", choices=["lcfn", "sun", "sengupta"])
-    p.add_argument("--resolution", type=int, default=128)
-    p.add_argument("--width", type=float, default=0.25, help="channel widths as a fraction of the paper's")
+    p.add_argument("--arch", default=None, choices=["lcfn", "sun", "sengupta"], help="default lcfn")
+    p.add_argument("--resolution", type=int, default=None, help="default 128")
+    p.add_argument("--width", type=float, default=None, help="channel widths as a fraction of the paper's; 0.25")
+    p.add_argument("--init", type=Path, default=None, help="start from this saved network (network.pt)")
     p.add_argument("--no-delight", action="store_true", help="ablation: plain skips instead of LCFN de-lighting")
     p.add_argument("--no-light-prediction", action="store_true", help="ablation: no light decoder or monitor loss")
     p.add_argument(
@@ -271,12 +312,14 @@ def main() -> None:
         "cuda" if a.device == "auto" and torch.cuda.is_available() else ("cpu" if a.device == "auto" else a.device)
     )
     net = model.NetConfig(
-        arch=a.arch,
-        resolution=a.resolution,
-        width=a.width,
+        arch=a.arch or "lcfn",
+        resolution=a.resolution or 128,
+        width=a.width or 0.25,
         delight=not a.no_delight,
         light_prediction=not a.no_light_prediction,
     )
+    if a.init:
+        net = init_config(a.init, a.arch, a.resolution, a.width, a.no_delight, a.no_light_prediction)
     cfg = TrainConfig(
         net=net,
         steps=a.steps,
@@ -286,6 +329,7 @@ def main() -> None:
         pairs=a.pairs,
         pairing=pairing.PairingRule(max_keypoint_distance=a.max_keypoint_distance),
         weights=LossWeights(delit_consistency=a.delit_consistency, monitor_colour=a.monitor_colour),
+        init=str(a.init.resolve()) if a.init else None,
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
     train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)

@@ -97,7 +97,7 @@ pub struct Args {
     container: Option<Container>,
 }
 
-fn offset_seconds(s: &str) -> Result<f64, String> {
+pub(crate) fn offset_seconds(s: &str) -> Result<f64, String> {
     let v: f64 = s
         .parse()
         .map_err(|_| format!("`{s}` is not a number of seconds"))?;
