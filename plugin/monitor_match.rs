@@ -227,6 +227,12 @@ impl MatchWindow {
             self.samples.clear();
         }
         self.samples.push_back((time, screen, predicted));
+        self.advance(time, window);
+    }
+
+    /// Lets the frames older than `window` seconds before `time` leave, when no
+    /// pair came for a while (no face, or the monitor stream stalled).
+    pub fn advance(&mut self, time: f64, window: f64) {
         while self
             .samples
             .front()
@@ -456,6 +462,12 @@ mod tests {
             w.push(i as f64 / FPS, &grey(0.5), &grey(0.5), 1.0);
         }
         assert_eq!(w.len(), 30, "1 s at 30 fps");
+        w.advance(100.0 / FPS + 0.5, 1.0);
+        assert_eq!(
+            w.len(),
+            15,
+            "frames without a pair still move the window on"
+        );
         w.push(0.0, &grey(0.5), &grey(0.5), 1.0);
         assert_eq!(w.len(), 1);
         w.reset();

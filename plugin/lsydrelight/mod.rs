@@ -54,6 +54,7 @@ use gst::glib;
 use gst::prelude::*;
 
 mod imp;
+mod match_check;
 mod monitor;
 mod qos;
 mod region;
