@@ -3,21 +3,24 @@
 //! face really faced from another recording's screen, or from its own screen
 //! shown late.
 //!
-//! Each recording's face video runs once through the element with its own
-//! monitor stream and `monitor_src` linked; the predicted light of every face
-//! frame is read back from `monitor_src`. The screen's light of every frame is
-//! computed from the monitor videos as the element computes it. Then, with the
-//! element's own scorer (`gstlsydrelight::monitor_match`), windows sliding every
-//! half second are scored for
+//! Every pairing of a face video with a monitor stream runs through the element,
+//! with `monitor_src` linked and `match-check` on:
 //!
-//! - genuine pairs: the face with its own screen;
-//! - delayed pairs: the face with its own screen 0.5, 1 and 2 s earlier (a replay
-//!   or a synthesised face that follows the screen late);
-//! - swapped pairs: the face with another recording's screen.
+//! - genuine: the face with its own monitor stream;
+//! - delayed: the face with its own monitor stream 0.5, 1 and 2 s late
+//!   (`monitor-offset`: each face frame is paired with the screen that long
+//!   before it, as a replayed or synthesised face that follows the screen late);
+//! - swapped: the face with another recording's monitor stream.
 //!
-//! and the ROC curve and its AUC are computed per window length. The check needs
-//! a screen that changes: windows where the screen stayed still, or the face was
-//! mostly away, get no score and are counted apart.
+//! The predicted light of every face frame is read back from `monitor_src`, and
+//! the screen's light of every frame is computed from the monitor video as the
+//! element computes it. With the element's own scorer
+//! (`gstlsydrelight::monitor_match`), windows sliding every half second are scored
+//! and the ROC curve and its AUC computed per window length. The element's own
+//! `lsydrelight-monitor-match` messages (5 s window, one a second) are scored too,
+//! as a check that the element reports what this program computes. The check
+//! needs a screen that changes: windows where the screen stayed still, or the
+//! face was mostly away, get no score and are counted apart.
 //!
 //! ```text
 //! cargo run --release --example match_check -- [--frames 300] [--dir target/recordings]
@@ -47,13 +50,21 @@ const DELAYS: [f64; 3] = [0.5, 1.0, 2.0];
 /// Windows start every this many seconds.
 const STEP: f64 = 0.5;
 
-/// Per-frame features of one recording.
-struct Series {
+/// One recording: its folder, frame rate and the screen's features per frame.
+struct Recorded {
     name: String,
+    dir: PathBuf,
     fps: f64,
     screen: Vec<Features>,
-    /// The prediction from each face frame; None where the element had none (no face).
-    predicted: Vec<Option<Features>>,
+}
+
+/// A face paired with a monitor stream, and what the element made of it.
+struct Trial {
+    kind: Kind,
+    face: usize,
+    screen: usize,
+    delay: f64,
+    pairing: Pairing,
 }
 
 fn screen_features(path: &Path) -> Result<Vec<Features>, String> {
@@ -66,19 +77,33 @@ fn screen_features(path: &Path) -> Result<Vec<Features>, String> {
     Ok(out)
 }
 
-/// Runs the face video through the element with its monitor stream and reads the
-/// predicted light of each frame from `monitor_src`.
-fn predicted_features(
-    dir: &Path,
+/// What one run of the element gave.
+struct Pairing {
+    /// The prediction from each face frame; None where there was none (no face).
+    predicted: Vec<Option<Features>>,
+    /// Scores of the element's own messages over a full window.
+    element_scores: Vec<f64>,
+}
+
+/// The window of the element's own messages, seconds.
+const ELEMENT_WINDOW: f64 = 5.0;
+
+/// Runs `face_dir`'s face video through the element with `monitor_dir`'s monitor
+/// stream paired `delay` seconds late, and reads the predicted light of each
+/// frame from `monitor_src`.
+fn run_pairing(
+    face_dir: &Path,
+    monitor_dir: &Path,
+    delay: f64,
     model: &Path,
     frames: usize,
     fps: f64,
-) -> Result<Vec<Option<Features>>, String> {
+) -> Result<Pairing, String> {
     init();
-    let play = |file: &str| {
+    let play = |path: PathBuf| {
         format!(
             "filesrc location=\"{}\" ! y4mdec ! capssetter caps=\"video/x-raw,colorimetry=bt601,chroma-site=jpeg\"",
-            dir.join(file).display()
+            path.display()
         )
     };
     let pipeline = gst::parse::launch(&format!(
@@ -86,8 +111,8 @@ fn predicted_features(
          {monitor} ! queue max-size-buffers=4 ! r.monitor_sink \
          r.src ! queue ! fakesink sync=false \
          r.monitor_src ! queue ! appsink name=predicted sync=false",
-        face = play("face.y4m"),
-        monitor = play("monitor.y4m"),
+        face = play(face_dir.join("face.y4m")),
+        monitor = play(monitor_dir.join("monitor.y4m")),
     ))
     .map_err(|e| e.to_string())?
     .downcast::<gst::Pipeline>()
@@ -99,10 +124,14 @@ fn predicted_features(
     );
     r.set_property(
         "target-location",
-        dir.join("target-studio.png")
+        face_dir
+            .join("target-studio.png")
             .to_str()
             .ok_or("path is not UTF-8")?,
     );
+    r.set_property("monitor-offset", (delay * 1e9).round() as i64);
+    r.set_property("match-check", true);
+    r.set_property("match-window", ELEMENT_WINDOW);
     let sink = pipeline
         .by_name("predicted")
         .ok_or("no appsink")?
@@ -143,19 +172,37 @@ fn predicted_features(
             ))));
         }
     };
-    let error = pipeline
-        .bus()
-        .and_then(|b| b.pop_filtered(&[gst::MessageType::Error]));
+    let bus = pipeline.bus().ok_or("no bus")?;
+    let mut error = None;
+    let mut element_scores = Vec::new();
+    while let Some(m) = bus.pop() {
+        match m.view() {
+            gst::MessageView::Error(e) => {
+                error = Some(format!("pipeline error: {} ({:?})", e.error(), e.debug()))
+            }
+            gst::MessageView::Element(e) => {
+                if let Some(s) = e.structure()
+                    && s.name() == "lsydrelight-monitor-match"
+                    && let Ok(score) = s.get::<f64>("score")
+                    && s.get::<u32>("frames").unwrap_or(0) as f64 >= ELEMENT_WINDOW * fps - 1.0
+                {
+                    element_scores.push(score);
+                }
+            }
+            _ => {}
+        }
+    }
     pipeline
         .set_state(gst::State::Null)
         .map_err(|e| e.to_string())?;
-    if let Some(m) = error
-        && let gst::MessageView::Error(e) = m.view()
-    {
-        return Err(format!("pipeline error: {} ({:?})", e.error(), e.debug()));
+    if let Some(e) = error {
+        return Err(e);
     }
     result?;
-    Ok(predicted)
+    Ok(Pairing {
+        predicted,
+        element_scores,
+    })
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Debug)]
@@ -174,29 +221,31 @@ struct Scores {
     too_few: usize,
 }
 
-/// Scores windows of `window` seconds sliding over the face of `face` paired with
-/// the screen of `screen` shown `delay` seconds before it.
-fn score_pair(
-    face: &Series,
-    screen: &Series,
-    delay: f64,
+/// Scores windows of `window` seconds sliding over a trial's face frames, each
+/// paired with the screen shown `delay` seconds before it.
+fn score_trial(
+    trial: &Trial,
+    recordings: &[Recorded],
     window: f64,
     settings: &MatchSettings,
     out: &mut Scores,
 ) {
-    let shift = (delay * face.fps).round() as usize;
-    let frames = face.predicted.len().min(screen.screen.len() + shift);
-    let per_window = (window * face.fps).round() as usize;
-    let step = (STEP * face.fps).round() as usize;
+    let fps = recordings[trial.face].fps;
+    let screen = &recordings[trial.screen].screen;
+    let predicted = &trial.pairing.predicted;
+    let shift = (trial.delay * fps).round() as usize;
+    let frames = predicted.len().min(screen.len() + shift);
+    let per_window = (window * fps).round() as usize;
+    let step = (STEP * fps).round() as usize;
     let mut end = shift + per_window;
     while end <= frames {
         let mut w = MatchWindow::default();
         for i in end - per_window..end {
-            if let Some(p) = face.predicted[i] {
-                w.push_features(i as f64 / face.fps, screen.screen[i - shift], p, window);
+            if let Some(p) = predicted[i] {
+                w.push_features(i as f64 / fps, screen[i - shift], p, window);
             }
         }
-        let s = w.score(settings, face.fps);
+        let s = w.score(settings, fps);
         match (s.verdict, s.score) {
             (Verdict::TooFewFrames, _) => out.too_few += 1,
             (_, None) => out.still += 1,
@@ -265,81 +314,91 @@ fn main() -> Result<(), String> {
     let names = flag("--recordings").unwrap_or_else(|| "cuts,slow,call,walkaway,steady".into());
     let settings = MatchSettings::default();
 
-    let mut series = Vec::new();
+    let mut recordings = Vec::new();
     for name in names.split(',') {
-        let rec = dir.join(format!("{name}-{frames}"));
-        ensure_recording(&rec, name, frames)?;
-        let fps = Y4mReader::open(&rec.join("face.y4m"))
+        let dir = dir.join(format!("{name}-{frames}"));
+        ensure_recording(&dir, name, frames)?;
+        let fps = Y4mReader::open(&dir.join("face.y4m"))
             .map_err(|e| e.to_string())?
             .fps as f64;
-        let screen = screen_features(&rec.join("monitor.y4m"))?;
-        let started = std::time::Instant::now();
-        let predicted = predicted_features(&rec, &model, frames, fps)?;
-        eprintln!(
-            "{name}: {} of {frames} frames with a prediction ({:.1} s)",
-            predicted.iter().flatten().count(),
-            started.elapsed().as_secs_f64()
-        );
-        series.push(Series {
+        let screen = screen_features(&dir.join("monitor.y4m"))?;
+        recordings.push(Recorded {
             name: name.to_string(),
+            dir,
             fps,
             screen,
-            predicted,
         });
     }
-    if let Some(path) = flag("--dump") {
-        // The per-frame features, for analysis outside this program.
-        let f = |x: &Features| [x.luminance, x.colour, x.spatial];
-        let dump: serde_json::Map<String, serde_json::Value> = series
-            .iter()
-            .map(|s| {
-                let screen: Vec<_> = s.screen.iter().map(f).collect();
-                let predicted: Vec<_> = s.predicted.iter().map(|p| p.as_ref().map(f)).collect();
-                (
-                    s.name.clone(),
-                    serde_json::json!({ "fps": s.fps, "screen": screen, "predicted": predicted }),
-                )
-            })
-            .collect();
-        std::fs::write(&path, serde_json::to_string(&dump).unwrap()).map_err(|e| e.to_string())?;
+    let mut trials = Vec::new();
+    for face in 0..recordings.len() {
+        let mut pairings = vec![(Kind::Genuine, face, 0.0)];
+        pairings.extend(DELAYS.map(|d| (Kind::Delayed, face, d)));
+        pairings.extend(
+            (0..recordings.len())
+                .filter(|s| *s != face)
+                .map(|s| (Kind::Swapped, s, 0.0)),
+        );
+        for (kind, screen, delay) in pairings {
+            let started = std::time::Instant::now();
+            let (f, s) = (&recordings[face], &recordings[screen]);
+            let pairing = run_pairing(&f.dir, &s.dir, delay, &model, frames, f.fps)?;
+            eprintln!(
+                "face {} with screen {} {delay} s late: {} of {frames} frames with a prediction, {} element messages over a full window ({:.1} s)",
+                f.name,
+                s.name,
+                pairing.predicted.iter().flatten().count(),
+                pairing.element_scores.len(),
+                started.elapsed().as_secs_f64()
+            );
+            trials.push(Trial {
+                kind,
+                face,
+                screen,
+                delay,
+                pairing,
+            });
+        }
     }
+    let element_scores = |kind: Kind| -> Vec<f64> {
+        trials
+            .iter()
+            .filter(|t| t.kind == kind)
+            .flat_map(|t| t.pairing.element_scores.iter().copied())
+            .collect()
+    };
+    let (element_genuine, mut element_impostor) =
+        (element_scores(Kind::Genuine), element_scores(Kind::Delayed));
+    element_impostor.extend(element_scores(Kind::Swapped));
+    let element_auc = auc(&element_genuine, &element_impostor);
 
     let mut table = String::from(
-        "| window | AUC | AUC against delayed | AUC against swapped | AUC luminance | AUC colour | AUC spatial | genuine windows | delayed | swapped | TPR at threshold | FPR at threshold | unscored: still screen / face away |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| window | AUC | AUC against delayed | against 0.5 / 1 / 2 s late | AUC against swapped | AUC luminance | AUC luminance change | AUC colour | AUC spatial | genuine windows | delayed | swapped | TPR at threshold | FPR at threshold | unscored: still screen / face away |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut json = serde_json::Map::new();
     for window in WINDOWS {
+        let settings = MatchSettings { window, ..settings };
         let mut by_kind: BTreeMap<Kind, Scores> = BTreeMap::new();
-        for face in &series {
-            score_pair(
-                face,
-                face,
-                0.0,
-                window,
-                &settings,
-                by_kind.entry(Kind::Genuine).or_default(),
-            );
-            for delay in DELAYS {
-                score_pair(
-                    face,
-                    face,
-                    delay,
-                    window,
-                    &settings,
-                    by_kind.entry(Kind::Delayed).or_default(),
-                );
-            }
-            for screen in series.iter().filter(|s| s.name != face.name) {
-                score_pair(
-                    face,
-                    screen,
-                    0.0,
-                    window,
-                    &settings,
-                    by_kind.entry(Kind::Swapped).or_default(),
-                );
+        let mut by_delay: BTreeMap<String, Scores> = BTreeMap::new();
+        for trial in &trials {
+            let scores = by_kind.entry(trial.kind).or_default();
+            score_trial(trial, &recordings, window, &settings, scores);
+            if trial.kind == Kind::Delayed {
+                let scores = by_delay.entry(format!("{}", trial.delay)).or_default();
+                score_trial(trial, &recordings, window, &settings, scores);
             }
         }
+        let per_delay: Vec<String> = DELAYS
+            .iter()
+            .map(|d| {
+                format!(
+                    "{:.3}",
+                    auc(
+                        &by_kind[&Kind::Genuine].scores,
+                        &by_delay[&format!("{d}")].scores
+                    )
+                )
+            })
+            .collect();
         let genuine = &by_kind[&Kind::Genuine];
         let (delayed, swapped) = (&by_kind[&Kind::Delayed], &by_kind[&Kind::Swapped]);
         let impostor: Vec<f64> = delayed
@@ -349,12 +408,10 @@ fn main() -> Result<(), String> {
             .copied()
             .collect();
         let component_auc = |c: Component| {
-            let imp: Vec<f64> = delayed.components[c.name()]
-                .iter()
-                .chain(&swapped.components[c.name()])
-                .copied()
-                .collect();
-            auc(&genuine.components[c.name()], &imp)
+            let values = |s: &Scores| s.components.get(c.name()).cloned().unwrap_or_default();
+            let mut impostor = values(delayed);
+            impostor.extend(values(swapped));
+            auc(&values(genuine), &impostor)
         };
         let rate = |v: &[f64]| {
             v.iter().filter(|s| **s >= settings.threshold).count() as f64 / v.len().max(1) as f64
@@ -362,10 +419,12 @@ fn main() -> Result<(), String> {
         let unscored = |s: &Scores| format!("{}/{}", s.still, s.too_few);
         let all_auc = auc(&genuine.scores, &impostor);
         table += &format!(
-            "| {window} s | {all_auc:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.3} | {:.3} | genuine {}, delayed {}, swapped {} |\n",
+            "| {window} s | {all_auc:.3} | {:.3} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.3} | {} | {} | {} | {:.3} | {:.3} | genuine {}, delayed {}, swapped {} |\n",
             auc(&genuine.scores, &delayed.scores),
+            per_delay.join(" / "),
             auc(&genuine.scores, &swapped.scores),
             component_auc(Component::Luminance),
+            component_auc(Component::LuminanceChange),
             component_auc(Component::Colour),
             component_auc(Component::Spatial),
             genuine.scores.len(),
@@ -394,14 +453,25 @@ fn main() -> Result<(), String> {
         "cargo run --release --example match_check -- --frames {frames} --recordings {names}"
     );
     let text = format!(
-        "# Monitor-match check on the simulator\n\nRecordings {names} ({frames} frames each); windows every {STEP} s; delays {DELAYS:?} s; threshold {}.\n\n{table}\nMade by `{command}`.\n",
-        settings.threshold
+        "# Monitor-match check on the simulator\n\nRecordings {names} ({frames} frames each); windows every {STEP} s; delays {DELAYS:?} s; threshold {}.\n\n{table}\nThe element's own messages ({ELEMENT_WINDOW} s window, one a second, full windows only): AUC {element_auc:.3} over {} genuine and {} impostor messages.\n\nMade by `{command}`.\n",
+        settings.threshold,
+        element_genuine.len(),
+        element_impostor.len(),
     );
     print!("{text}");
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     std::fs::write(out.join("table.md"), text).map_err(|e| e.to_string())?;
-    let json =
-        serde_json::json!({ "command": command, "threshold": settings.threshold, "windows": json });
+    let json = serde_json::json!({
+        "command": command,
+        "threshold": settings.threshold,
+        "windows": json,
+        "element_messages": {
+            "window": ELEMENT_WINDOW,
+            "auc": element_auc,
+            "genuine": element_genuine,
+            "impostor": element_impostor,
+        },
+    });
     std::fs::write(
         out.join("results.json"),
         serde_json::to_string(&json).unwrap() + "\n",
