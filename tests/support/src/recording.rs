@@ -265,11 +265,11 @@ fn score_pipeline(
             (_, Err(e), _) | (_, _, Err(e)) => break Err(e.to_string()),
         };
         let size = out.width.min(out.height);
-        let region = Some(((out.width - size) / 2, (out.height - size) / 2, size));
-        let (e, n) = sq_err(&out, &gt, region);
+        let face = ((out.width - size) / 2, (out.height - size) / 2, size);
+        let (e, n) = sq_err(&out, &gt, Some(face));
         region_err += e;
         region_n += n;
-        in_err += sq_err(&inp, &gt, region).0;
+        in_err += sq_err(&inp, &gt, Some(face)).0;
         let (e, n) = sq_err(&out, &gt, None);
         frame_err += e;
         frame_n += n;
@@ -287,7 +287,7 @@ fn score_pipeline(
         }
         if with_flow {
             let flow_started = Instant::now();
-            let luma = [&out, &gt, &inp].map(|img| Gray::luma(img, region.unwrap()));
+            let luma = [&out, &gt, &inp].map(|img| Gray::luma(img, face));
             if let Some([po, pg, pi]) = &previous_luma {
                 let truth_flow = optical_flow(pg, &luma[1]);
                 tof_out += tof((po, &luma[0]), &truth_flow);
