@@ -7,7 +7,8 @@
 //!
 //! The flow is Horn and Schunck's (1981), coarse to fine over an image pyramid
 //! with the second image warped by the flow so far at each level, on the Rec. 601
-//! luma in [0, 1].
+//! luma in [0, 1] blurred a little first (a 5-tap binomial filter), so that the
+//! camera's noise is not read as motion.
 
 use deskstage::monitor::RgbImage;
 
@@ -61,6 +62,26 @@ impl Gray {
         let top = self.at(ix, iy) * (1.0 - ax) + self.at(ix + 1, iy) * ax;
         let bottom = self.at(ix, iy + 1) * (1.0 - ax) + self.at(ix + 1, iy + 1) * ax;
         top * (1.0 - ay) + bottom * ay
+    }
+
+    /// Blurred by the binomial filter [1, 4, 6, 4, 1] / 16 across and down.
+    fn blurred(&self) -> Gray {
+        const TAPS: [f32; 5] = [1.0 / 16.0, 4.0 / 16.0, 6.0 / 16.0, 4.0 / 16.0, 1.0 / 16.0];
+        let pass = |g: &Gray, dx: isize, dy: isize| {
+            let mut data = Vec::with_capacity(g.data.len());
+            for y in 0..g.height as isize {
+                for x in 0..g.width as isize {
+                    data.push(
+                        (-2..=2)
+                            .zip(TAPS)
+                            .map(|(k, t)| t * g.at(x + k * dx, y + k * dy))
+                            .sum(),
+                    );
+                }
+            }
+            Gray { data, ..*g }
+        };
+        pass(&pass(self, 1, 0), 0, 1)
     }
 
     /// Half the size, each pixel the mean of a 2 × 2 block.
@@ -206,7 +227,7 @@ fn refine(a: &Gray, b: &Gray, flow: &mut Flow) {
 /// The optical flow from `a` to `b` (the same size).
 pub fn optical_flow(a: &Gray, b: &Gray) -> Flow {
     assert_eq!((a.width, a.height), (b.width, b.height));
-    let mut pyramid = vec![(a.clone(), b.clone())];
+    let mut pyramid = vec![(a.blurred(), b.blurred())];
     while pyramid
         .last()
         .is_some_and(|(a, _)| a.width.min(a.height) / 2 >= COARSEST)
