@@ -464,7 +464,8 @@ mod tests {
             w.push(i as f64 / FPS, &grey(0.5), &grey(0.5), 1.0);
         }
         assert_eq!(w.len(), 30, "1 s at 30 fps");
-        w.advance(100.0 / FPS + 0.5, 1.0);
+        // Half a second after the last frame: its last half second stays.
+        w.advance(99.0 / FPS + 0.51, 1.0);
         assert_eq!(
             w.len(),
             15,
