@@ -336,7 +336,7 @@ fn run_child(v: Variant) -> Result<VariantResult, String> {
             .iter()
             .map(|(k, v)| (k.as_str(), v.as_str()))
             .collect();
-        let s = score_recording(&dir, "sunset", true, &refs)?;
+        let s = score_recording(&dir, "sunset", true, &refs, false)?;
         frames += s.frames;
         recordings.push(RecordingResult {
             recording: name.clone(),

@@ -1,6 +1,9 @@
 //! Scores the element end to end on a simulator recording against its exact
 //! ground truth, for every target light, and records the figures in a model's
 //! manifest (`metrics.element`), which the end-to-end test checks against.
+//! Beside the change error it gives TecoGAN's tOF (classical optical flow, no
+//! network weights) for the relit output and for the unrelit input; ms/frame
+//! leaves out the time computing the flow.
 //!
 //! ```text
 //! cargo run --release --example evaluate_element -- [--recording call] [--frames 90]
@@ -30,22 +33,24 @@ fn main() -> Result<(), String> {
     ensure_recording(&dir, &recording, frames)?;
     let mut results = serde_json::Map::new();
     println!(
-        "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | ms/frame |"
+        "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | tOF face region | input tOF | ms/frame |"
     );
-    println!("|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|");
     for target in ["studio", "sunset", "left-key"] {
         let props = [(
             "model-location",
             model.to_str().ok_or("model path is not UTF-8")?,
         )];
-        let s = score_recording(&dir, target, true, &props)?;
+        let s = score_recording(&dir, target, true, &props, true)?;
         println!(
-            "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.1} |",
+            "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.4} | {:.1} |",
             s.frames,
             s.rmse_region,
             s.rmse_frame,
             s.input_rmse_region,
             s.change_rmse,
+            s.tof_region.unwrap_or(f64::NAN),
+            s.input_tof_region.unwrap_or(f64::NAN),
             s.ms_per_frame
         );
         results.insert(target.into(), serde_json::to_value(&s).unwrap());

@@ -7,6 +7,7 @@
 //! - [`lsydrelight`]: the element.
 //! - [`engine`]: the model contract, ONNX Runtime and the stateful relighter.
 //! - [`frame`], [`light`]: pixels in and out, and monitor frames as lights.
+//! - [`monitor_match`]: whether the light on a face follows the screen it faces.
 //! - [`paths`]: where the default model and ONNX Runtime are found.
 
 pub mod engine;
@@ -14,6 +15,7 @@ pub mod face;
 pub mod frame;
 pub mod light;
 pub mod lsydrelight;
+pub mod monitor_match;
 pub mod paths;
 
 fn plugin_init(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {

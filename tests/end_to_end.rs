@@ -34,7 +34,7 @@ fn recorded_call_matches_the_model_card() {
         "models/default/model.json has no metrics.element.call_90; run the evaluate_element example with --record"
     );
     for target in TARGETS {
-        let s = score_recording(call_90(), target, true, &[]).unwrap();
+        let s = score_recording(call_90(), target, true, &[], false).unwrap();
         let want = card["targets"][target]["rmse_region"].as_f64().unwrap();
         assert_eq!(s.frames, 90);
         assert!(

@@ -18,6 +18,7 @@ use gst_base::prelude::*;
 use gst_base::subclass::prelude::*;
 
 use super::ExecutionProvider;
+use super::match_check::{self, MatchCheck};
 use super::monitor::{Decision, Fallback, MonitorTrack, Reading, Transition};
 use super::qos::{self, Qos};
 use super::region::FaceRegion;
@@ -79,6 +80,7 @@ pub struct LsydRelight {
     /// A warning about dropped `monitor_src` frames was posted (once per run).
     side_drop_warned: AtomicBool,
     monitor_watch: Mutex<Option<gst::PeriodicClockId>>,
+    match_check: Mutex<MatchCheck>,
 }
 
 impl State {
@@ -155,6 +157,7 @@ impl LsydRelight {
         if let Some(state) = lock(&self.state).as_mut() {
             state.reset();
         }
+        lock(&self.match_check).reset();
         gst::debug!(CAT, imp = self, "reset temporal state: {why}");
     }
 
@@ -309,6 +312,10 @@ impl LsydRelight {
         settings: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
         let started = Instant::now();
+        let screen = match &source {
+            Source::Known(light) if settings.match_check => Some(light.clone()),
+            _ => None,
+        };
         self.count(|st| {
             st.frames += 1;
             match &source {
@@ -323,7 +330,10 @@ impl LsydRelight {
             .clone()
             .ok_or(gst::FlowError::NotNegotiated)?;
         self.update_state(state, &buffer, settings);
-        let want_prediction = self.monitor_src.is_linked();
+        // The prediction shows a blurred view of the user's screen: it is made only
+        // for someone who asked for it (or when it is the only source light there is).
+        let show_prediction = self.monitor_src.is_linked();
+        let want_prediction = show_prediction || settings.match_check;
         let time = running_time(&self.face_pad, buffer.pts()).map_or(0.0, |t| t.seconds_f64());
         let (region, outcome) = {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
@@ -420,10 +430,47 @@ impl LsydRelight {
             st.face_detections = follow_counts.detections;
             st.face_seconds = follow_counts.seconds;
         });
-        if want_prediction {
+        if show_prediction {
             self.show_prediction(predicted.as_ref(), &buffer);
         }
+        if settings.match_check {
+            let fps = info.fps();
+            let fps = if fps.numer() > 0 {
+                fps.numer() as f64 / fps.denom() as f64
+            } else {
+                30.0
+            };
+            self.check_match(time, screen.zip(predicted), fps, settings);
+        }
         Ok(buffer)
+    }
+
+    /// Adds a face frame to the monitor-match check, and posts its message when due.
+    fn check_match(&self, time: f64, pair: Option<(Light, Light)>, fps: f64, settings: &Settings) {
+        let pair = pair.as_ref().map(|(screen, predicted)| (screen, predicted));
+        let Some(score) = lock(&self.match_check).frame(time, pair, &settings.matching, fps) else {
+            return;
+        };
+        gst::debug!(
+            CAT,
+            imp = self,
+            "monitor match at {time:.2} s: {} over {} frames, score {:?}, components {:?}",
+            score.verdict.name(),
+            score.frames,
+            score.score,
+            score.components
+        );
+        let structure = match_check::message_structure(
+            &score,
+            &settings.matching,
+            gst::ClockTime::from_seconds_f64(time),
+        );
+        let element = self.obj();
+        let _ = element.post_message(
+            gst::message::Element::builder(structure)
+                .src(&*element)
+                .build(),
+        );
     }
 
     /// Queues the predicted light (or a gap) for `monitor_src` at the face frame's time.
@@ -668,6 +715,7 @@ impl ObjectSubclass for LsydRelight {
             caps_warned: AtomicBool::new(false),
             side_drop_warned: AtomicBool::new(false),
             monitor_watch: Mutex::new(None),
+            match_check: Mutex::new(MatchCheck::default()),
         }
     }
 }

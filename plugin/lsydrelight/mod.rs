@@ -16,6 +16,13 @@
 //! - `monitor_src`: the predicted source monitor light as a small RGB video at the face
 //!   frame rate; computed only while linked.
 //!
+//! With `match-check` on and a monitor stream, the element checks that the light on the
+//! face follows the screen (the paper's section 4.3, against replayed or synthesised
+//! faces) and posts an element message `lsydrelight-monitor-match` about once a second
+//! with the score over `match-window` seconds and its verdict ([`crate::monitor_match`]).
+//! The predicted light is a blurred view of the user's screen: it is computed only for
+//! a linked `monitor_src`, the check, or when the source light is unknown.
+//!
 //! The face is followed with a face detector (`face-tracking`), and the square the
 //! model's crop rule gives around it is relit; with no face the frame passes. A
 //! dark face region (black frames, fades) passes too.
@@ -54,6 +61,7 @@ use gst::glib;
 use gst::prelude::*;
 
 mod imp;
+mod match_check;
 mod monitor;
 mod qos;
 mod region;

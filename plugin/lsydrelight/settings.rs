@@ -10,6 +10,7 @@ use gst::prelude::*;
 
 use super::ExecutionProvider;
 use crate::engine::{Skips, Temporal};
+use crate::monitor_match::MatchSettings;
 use crate::paths;
 
 pub const DEFAULT_THREADS: u32 = 2;
@@ -57,6 +58,9 @@ pub struct Settings {
     pub reset_gap: gst::ClockTime,
     pub skips: Skips,
     pub qos: bool,
+    /// Check that the light on the face follows the monitor stream, and say so on the bus.
+    pub match_check: bool,
+    pub matching: MatchSettings,
 }
 
 impl Default for Settings {
@@ -83,6 +87,8 @@ impl Default for Settings {
             reset_gap: DEFAULT_RESET_GAP,
             skips: Skips::default(),
             qos: DEFAULT_QOS,
+            match_check: false,
+            matching: MatchSettings::default(),
         }
     }
 }
@@ -150,6 +156,9 @@ impl Settings {
                 self.skips.presence_threshold = v.get::<f64>().expect(checked) as f32
             }
             "qos" => self.qos = v.get().expect(checked),
+            "match-check" => self.match_check = v.get().expect(checked),
+            "match-window" => self.matching.window = v.get().expect(checked),
+            "match-threshold" => self.matching.threshold = v.get().expect(checked),
             _ => return false,
         }
         true
@@ -186,6 +195,9 @@ impl Settings {
             "skip-absent" => self.skips.skip_absent.to_value(),
             "presence-threshold" => (self.skips.presence_threshold as f64).to_value(),
             "qos" => self.qos.to_value(),
+            "match-check" => self.match_check.to_value(),
+            "match-window" => self.matching.window.to_value(),
+            "match-threshold" => self.matching.threshold.to_value(),
             _ => return None,
         })
     }
@@ -394,6 +406,28 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .nick("QoS")
                 .blurb("In live pipelines, reuse the last relighting for frames that are already late instead of falling further behind, and post QoS messages")
                 .default_value(DEFAULT_QOS)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("match-check")
+                .nick("Monitor-match check")
+                .blurb("Check that the light on the face follows the monitor stream (against replayed or synthesised faces, paper section 4.3): runs the light decoder on every relit frame and posts an element message lsydrelight-monitor-match about once a second with the score over match-window and its verdict")
+                .default_value(d.match_check)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("match-window")
+                .nick("Monitor-match window")
+                .blurb("Seconds of frames the monitor-match score covers; shorter windows answer sooner and are less sure (README: the check's ROC by window length)")
+                .minimum(0.5)
+                .maximum(60.0)
+                .default_value(d.matching.window)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("match-threshold")
+                .nick("Monitor-match threshold")
+                .blurb("Score (a correlation, -1 to 1) at or above which the face matches the monitor")
+                .minimum(-1.0)
+                .maximum(1.0)
+                .default_value(d.matching.threshold)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecBoxed::builder::<gst::Structure>("stats")

@@ -10,6 +10,7 @@
 //!   against its exact ground truth;
 //! - [`quality`]: measures of the output that need no ground truth (box edges,
 //!   mottling, pumping), for real footage;
+//! - [`flow`]: classical optical flow, and TecoGAN's tOF built on it;
 //! - [`flags`]: the examples' command-line flags.
 //!
 //! The checkout's paths and registering the plugin are here at the top.
@@ -18,6 +19,7 @@ use std::path::{Path, PathBuf};
 
 pub mod element;
 pub mod flags;
+pub mod flow;
 pub mod person;
 pub mod quality;
 pub mod recording;

@@ -19,6 +19,7 @@ use deskstage::monitor::RgbImage;
 use gst::prelude::*;
 use gst_video::prelude::*;
 
+use crate::flow::{Gray, optical_flow, tof};
 use crate::init;
 
 /// Errors of the whole frame and of the face region, against ground truth.
@@ -34,6 +35,12 @@ pub struct Score {
     /// Adjacent-frame RMSE of the output, and of the change against the ground truth's change.
     pub adjacent_rmse: f64,
     pub change_rmse: f64,
+    /// TecoGAN's tOF over the face region ([`crate::flow`]): the mean length, in
+    /// pixels, of the difference between the output's optical flow from frame to
+    /// frame and the ground truth's; and the same for the unrelit input. Computed
+    /// when asked for (`with_flow`): classical flow takes a while.
+    pub tof_region: Option<f64>,
+    pub input_tof_region: Option<f64>,
     /// Share of adjacent frame pairs whose RMSE exceeds each of `ADJACENT_THRESHOLDS`
     /// (the paper's error rates).
     pub adjacent_over: Vec<f64>,
@@ -151,12 +158,14 @@ fn launch(description: &str) -> Result<gst::Pipeline, String> {
 
 /// Relights `<dir>/face.y4m` (with `<dir>/monitor.y4m` unless `with_monitor` is false)
 /// to the target `<dir>/target-<target>.png` and scores it against `<dir>/truth-<target>.y4m`.
-/// `properties` are set on the element from strings, as gst-launch does.
+/// `properties` are set on the element from strings, as gst-launch does; `with_flow`
+/// adds the flow-based tOF.
 pub fn score_recording(
     dir: &Path,
     target: &str,
     with_monitor: bool,
     properties: &[(&str, &str)],
+    with_flow: bool,
 ) -> Result<Score, String> {
     init();
     let monitor = if with_monitor {
@@ -186,6 +195,7 @@ pub fn score_recording(
         &face,
         &dir.join(format!("truth-{target}.y4m")),
         Some(&r),
+        with_flow,
     )
 }
 
@@ -198,7 +208,7 @@ pub fn score_unrelit(face: &Path, truth: &Path) -> Result<Score, String> {
         "{} ! queue max-size-buffers=4 ! appsink name=out sync=false",
         play_y4m(face)
     ))?;
-    score_pipeline(&pipeline, face, truth, None)
+    score_pipeline(&pipeline, face, truth, None, false)
 }
 
 /// Plays `pipeline`, whose appsink `out` gives the frames to score, and scores
@@ -209,6 +219,7 @@ fn score_pipeline(
     input: &Path,
     truth: &Path,
     element: Option<&gst::Element>,
+    with_flow: bool,
 ) -> Result<Score, String> {
     let sink = pipeline
         .by_name("out")
@@ -227,6 +238,11 @@ fn score_pipeline(
     let mut previous: Option<(RgbImage, RgbImage)> = None;
     let mut adjacent = Vec::new();
     let mut change = 0.0;
+    // The face regions of the last output, truth and input, and the tOF sums.
+    let mut previous_luma: Option<[Gray; 3]> = None;
+    let (mut tof_out, mut tof_in, mut tof_pairs) = (0.0, 0.0, 0);
+    // Time spent on the flow, which is not the pipeline's.
+    let mut flow_time = std::time::Duration::ZERO;
     let started = Instant::now();
     let result = loop {
         let Some(sample) = sink.try_pull_sample(gst::ClockTime::from_seconds(120)) else {
@@ -249,11 +265,11 @@ fn score_pipeline(
             (_, Err(e), _) | (_, _, Err(e)) => break Err(e.to_string()),
         };
         let size = out.width.min(out.height);
-        let region = Some(((out.width - size) / 2, (out.height - size) / 2, size));
-        let (e, n) = sq_err(&out, &gt, region);
+        let face = ((out.width - size) / 2, (out.height - size) / 2, size);
+        let (e, n) = sq_err(&out, &gt, Some(face));
         region_err += e;
         region_n += n;
-        in_err += sq_err(&inp, &gt, region).0;
+        in_err += sq_err(&inp, &gt, Some(face)).0;
         let (e, n) = sq_err(&out, &gt, None);
         frame_err += e;
         frame_n += n;
@@ -269,10 +285,22 @@ fn score_pipeline(
             adjacent.push((a / out.data.len() as f64).sqrt());
             change += (c / out.data.len() as f64).sqrt();
         }
+        if with_flow {
+            let flow_started = Instant::now();
+            let luma = [&out, &gt, &inp].map(|img| Gray::luma(img, face));
+            if let Some([po, pg, pi]) = &previous_luma {
+                let truth_flow = optical_flow(pg, &luma[1]);
+                tof_out += tof((po, &luma[0]), &truth_flow);
+                tof_in += tof((pi, &luma[2]), &truth_flow);
+                tof_pairs += 1;
+            }
+            previous_luma = Some(luma);
+            flow_time += flow_started.elapsed();
+        }
         previous = Some((out, gt));
         score.frames += 1;
     };
-    let elapsed = started.elapsed();
+    let elapsed = started.elapsed().saturating_sub(flow_time);
     if let Some(element) = element {
         score.stats = structure_json(&element.property::<gst::Structure>("stats"));
     }
@@ -300,6 +328,10 @@ fn score_pipeline(
         .map(|t| adjacent.iter().filter(|a| *a > t).count() as f64 / adjacent.len().max(1) as f64)
         .collect();
     score.change_rmse = change / (score.frames - 1).max(1) as f64;
+    if with_flow && tof_pairs > 0 {
+        score.tof_region = Some(tof_out / tof_pairs as f64);
+        score.input_tof_region = Some(tof_in / tof_pairs as f64);
+    }
     score.ms_per_frame = elapsed.as_secs_f64() * 1e3 / score.frames as f64;
     Ok(score)
 }
