@@ -8,6 +8,7 @@
 //! - [`engine`]: the model contract, ONNX Runtime and the stateful relighter.
 //! - [`frame`], [`light`]: pixels in and out, and monitor frames as lights.
 //! - [`paths`]: where the default model and ONNX Runtime are found.
+//! - [`targets`]: target-light presets, environment maps and crossfades.
 
 pub mod engine;
 pub mod face;
@@ -15,6 +16,7 @@ pub mod frame;
 pub mod light;
 pub mod lsydrelight;
 pub mod paths;
+pub mod targets;
 
 fn plugin_init(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {
     paths::set_plugin_file(plugin.filename());
