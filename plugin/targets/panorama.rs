@@ -146,6 +146,11 @@ impl Panorama {
             .map_err(|e| format!("environment map {}: {e}", path.display()))
     }
 
+    /// The linear RGB of pixel (`x`, `y`), row 0 at the top.
+    pub fn pixel(&self, x: usize, y: usize) -> [f32; 3] {
+        self.rgb[y * self.width + x]
+    }
+
     /// The monitor light that shows the panorama through `view`.
     pub fn light(&self, view: &View) -> Light {
         let gain = 2f32.powf(view.exposure as f32);
