@@ -255,7 +255,7 @@ fn measured_targets(map: &Path) -> Vec<Measured> {
     let mut targets: Vec<_> = Preset::ALL
         .iter()
         .map(|p| Measured {
-            name: p.nick().to_string(),
+            name: format!("preset-{}", p.nick()),
             light: p.light(),
             properties: vec![("target-preset".to_string(), p.nick().to_string())],
         })
@@ -288,7 +288,7 @@ fn measure() -> Result<(), String> {
     let model = flag("--model")
         .map(PathBuf::from)
         .unwrap_or_else(default_model);
-    let dir = checkout().join(format!("target/recordings/targets-call-{frames}"));
+    let dir = checkout().join(format!("target/tmp/targets-call-{frames}"));
     let map = dir.join("outdoor.exr");
     write_exr(512, &map)?;
     let targets = measured_targets(&map);
@@ -331,6 +331,7 @@ fn measure() -> Result<(), String> {
 
 /// What target changes and video targets cost.
 fn timing() -> Result<(), String> {
+    lsydrelight_testkit::init();
     let reps = 20;
     let started = Instant::now();
     for _ in 0..reps {

@@ -91,6 +91,7 @@ mod tests {
         let mut fade = Crossfade::default();
         assert!(fade.at(Some(0)).is_none());
         fade.jump(Light::uniform([0.0; 3]));
+        fade.at(Some(0));
         fade.retarget(Light::uniform([1.0; 3]), 500 * MS);
         // The first frame after the change starts the fade at its own time.
         assert_eq!(fade.at(Some(1000 * MS)).unwrap().0[0], 0.0);
@@ -106,6 +107,7 @@ mod tests {
     fn a_change_mid_fade_starts_from_the_light_shown_so_nothing_jumps() {
         let mut fade = Crossfade::default();
         fade.jump(Light::uniform([0.0; 3]));
+        fade.at(Some(0));
         fade.retarget(Light::uniform([1.0; 3]), 400 * MS);
         fade.at(Some(0));
         let mid = fade.at(Some(200 * MS)).unwrap().0[0];

@@ -276,22 +276,40 @@ impl Panorama {
         let mut weights = vec![0f64; n];
         let dlon = 2.0 * PI / (w * split as f64);
         let dlat = PI / (h * split as f64);
+        // The sines and cosines of every part's longitude, computed once.
+        let lons: Vec<(f64, f64)> = (0..self.width * split)
+            .map(|k| (-PI + (k as f64 + 0.5) * dlon).sin_cos())
+            .collect();
+        // Directions farther from straight ahead than the window's corners cannot land
+        // in it (for windows up to a hemisphere wide, whose corners are the farthest).
+        let (ahead_lon, ahead_lat) = rotate(0.0, 0.0, yaw, pitch);
+        let ahead = to_vector(ahead_lon, ahead_lat);
+        let nearest = if fov <= 180.0 {
+            half_w.cos() * half_h.cos() - 1e-9
+        } else {
+            -2.0
+        };
         for j in 0..self.height {
+            let row = &self.rgb[j * self.width..(j + 1) * self.width];
             for sj in 0..split {
                 let top = PI / 2.0 - (j * split + sj) as f64 * dlat;
-                let lat = top - dlat / 2.0;
+                let (sin_lat, cos_lat) = (top - dlat / 2.0).sin_cos();
                 let solid = (top.sin() - (top - dlat).sin()) * dlon;
-                for i in 0..self.width {
-                    let p = tone(&self.rgb[j * self.width + i]);
-                    for si in 0..split {
-                        let lon = -PI + ((i * split + si) as f64 + 0.5) * dlon;
-                        let (vlon, vlat) = unrotate(lon, lat, yaw, pitch);
+                for (i, pixel) in row.iter().enumerate() {
+                    let mut toned = None;
+                    for &(sin_lon, cos_lon) in &lons[i * split..(i + 1) * split] {
+                        let v = [cos_lat * sin_lon, sin_lat, cos_lat * cos_lon];
+                        if v[0] * ahead[0] + v[1] * ahead[1] + v[2] * ahead[2] < nearest {
+                            continue;
+                        }
+                        let (vlon, vlat) = to_angles(unrotate(v, yaw, pitch));
                         if vlon.abs() >= half_w || vlat.abs() >= half_h {
                             continue;
                         }
                         let c = (((vlon + half_w) / (2.0 * half_w)) * LIGHT_COLS as f64) as usize;
                         let r = (((half_h - vlat) / (2.0 * half_h)) * LIGHT_ROWS as f64) as usize;
                         let cell = r.min(LIGHT_ROWS - 1) * LIGHT_COLS + c.min(LIGHT_COLS - 1);
+                        let p = toned.get_or_insert_with(|| tone(pixel));
                         for ch in 0..3 {
                             sums[cell][ch] += solid * p[ch] as f64;
                         }
@@ -334,15 +352,14 @@ fn rotate(lon: f64, lat: f64, yaw: f64, pitch: f64) -> (f64, f64) {
     to_angles([x, y, z])
 }
 
-/// The inverse of [`rotate`]: a world direction in the viewer's frame.
-fn unrotate(lon: f64, lat: f64, yaw: f64, pitch: f64) -> (f64, f64) {
-    let [x, y, z] = to_vector(lon, lat);
+/// The inverse of [`rotate`]: a world direction vector in the viewer's frame.
+fn unrotate([x, y, z]: [f64; 3], yaw: f64, pitch: f64) -> [f64; 3] {
     let (x, z) = (x * yaw.cos() - z * yaw.sin(), x * yaw.sin() + z * yaw.cos());
     let (y, z) = (
         y * pitch.cos() - z * pitch.sin(),
         y * pitch.sin() + z * pitch.cos(),
     );
-    to_angles([x, y, z])
+    [x, y, z]
 }
 
 #[cfg(test)]
