@@ -378,28 +378,34 @@ fn timing() -> Result<(), String> {
         e.set_property("reuse-interval", 1u32);
         let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
         h.set_src_caps(c.clone());
-        let mut th = video.then(|| {
+        // The target video comes from its own thread: each face frame waits for the
+        // target frame after its time, as with any aligned stream.
+        let pusher = video.then(|| {
             let mut th = Harness::with_element(&e, Some("target_sink"), None);
-            th.set_src_caps(rgb_caps(256, 144, 30));
-            th
+            let tc = rgb_caps(256, 144, 30);
+            th.set_src_caps(tc.clone());
+            std::thread::spawn(move || {
+                for i in 0..frames {
+                    let level = (i % 10) as f32 / 10.0;
+                    let light = Light::uniform([level, 0.5, 1.0 - level]);
+                    let frame = light_frame(&light, 256, 144);
+                    if th.push(buffer(&frame, &tc, frame_time(i), FRAME)).is_err() {
+                        break;
+                    }
+                }
+                th.push_event(gst::event::Eos::new());
+                th
+            })
         });
         for i in 0..frames {
             if fade && i % 15 == 0 {
                 e.set_property("target-preset", Preset::ALL[(i / 15) as usize % 9]);
             }
-            if let Some(th) = th.as_mut() {
-                let level = (i % 10) as f32 / 10.0;
-                let frame = light_frame(&Light::uniform([level, 0.5, 1.0 - level]), 256, 144);
-                th.push(buffer(
-                    &frame,
-                    &rgb_caps(256, 144, 30),
-                    frame_time(i),
-                    FRAME,
-                ))
-                .unwrap();
-            }
             h.push(buffer(&person, &c, frame_time(i), FRAME)).unwrap();
             h.pull().unwrap();
+        }
+        if let Some(p) = pusher {
+            p.join().unwrap();
         }
         let st = e.property::<gst::Structure>("stats");
         let f = |k: &str| st.get::<f64>(k).unwrap();
