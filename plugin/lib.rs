@@ -9,6 +9,7 @@
 //! - [`frame`], [`light`]: pixels in and out, and monitor frames as lights.
 //! - [`monitor_match`]: whether the light on a face follows the screen it faces.
 //! - [`paths`]: where the default model and ONNX Runtime are found.
+//! - [`targets`]: target-light presets, environment maps and crossfades.
 
 pub mod engine;
 pub mod face;
@@ -17,6 +18,7 @@ pub mod light;
 pub mod lsydrelight;
 pub mod monitor_match;
 pub mod paths;
+pub mod targets;
 
 fn plugin_init(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {
     paths::set_plugin_file(plugin.filename());

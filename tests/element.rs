@@ -280,6 +280,8 @@ fn prediction_runs_only_when_someone_needs_it() {
 fn target_can_change_while_playing() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
     e.set_property("alpha", 1.0f32);
+    // Without a crossfade (tests/targets.rs has those) the next frame has the new target.
+    e.set_property("target-transition", 0u64);
     let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
     e.set_property("target-location", target("studio"));
     h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))

@@ -129,7 +129,11 @@ fn nan_model() -> std::path::PathBuf {
 fn nan_from_the_model_is_never_shown() {
     let model = nan_model();
     // The model is read when the element starts, which the harness does at once.
-    let (e, mut h) = harness_with(|e| e.set_property("model-location", model.to_str().unwrap()));
+    // The target changes at once (no crossfade), so the trigger target is the one encoded.
+    let (e, mut h) = harness_with(|e| {
+        e.set_property("model-location", model.to_str().unwrap());
+        e.set_property("target-transition", 0u64);
+    });
     let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
     h.set_src_caps(c.clone());
     let face = buffer(face_rgb(), &c, frame_time(0), FRAME);

@@ -34,6 +34,7 @@ use crate::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Source,
 };
 use crate::light::Light;
+use crate::targets::Crossfade;
 
 pub static CAT: LazyLock<gst::DebugCategory> = LazyLock::new(|| {
     gst::DebugCategory::new(
@@ -58,6 +59,8 @@ struct State {
     last_face_rt: Option<gst::ClockTime>,
     /// The target generation the policy has.
     target_generation: u64,
+    /// The target light the policy is given, fading to a new one.
+    fade: Crossfade,
     /// A NaN warning was posted and no frame has been relit since.
     nan_warned: bool,
 }
@@ -66,6 +69,9 @@ pub struct LsydRelight {
     face_pad: gst_base::AggregatorPad,
     monitor_src: gst::Pad,
     monitor_pad: Mutex<Option<gst_base::AggregatorPad>>,
+    /// The video target (`target_sink`), aligned like the monitor stream.
+    target_pad: Mutex<Option<gst_base::AggregatorPad>>,
+    target_track: Mutex<MonitorTrack>,
     side: Arc<SideStream>,
     settings: Mutex<Settings>,
     target: Mutex<TargetSlot>,
@@ -126,27 +132,30 @@ impl LsydRelight {
         update(&mut lock(&self.stats));
     }
 
-    /// Decodes a new target image here, on the caller's thread.
-    fn set_target_location(&self, value: &glib::Value) {
-        lock(&self.settings).set("target-location", value);
-        let path = lock(&self.settings).target_location.clone();
-        let decoded = Light::from_png(&path);
+    /// Sets a target property and resolves the target it names here, on the
+    /// caller's thread (GstController's: the streaming thread).
+    fn set_target(&self, name: &str, value: &glib::Value) {
+        let source = {
+            let mut settings = lock(&self.settings);
+            settings.set(name, value);
+            settings.target_source()
+        };
+        let decoded = TargetSlot::resolve(&self.target, &source);
         let update = lock(&self.target).update(decoded);
         match update {
-            Update::Applied => {
-                gst::debug!(CAT, imp = self, "decoded target {}", path.display())
-            }
+            Update::Applied => gst::debug!(CAT, imp = self, "{name}: target {source}"),
             Update::Deferred => gst::debug!(
                 CAT,
                 imp = self,
-                "target {} cannot be read; the error surfaces at start",
-                path.display()
+                "target {source} cannot be read; the error surfaces at start"
             ),
             Update::KeptPrevious(e) => gst::element_imp_warning!(
                 self,
                 gst::ResourceError::OpenRead,
                 ("Keeping the previous target light: {}", e),
-                ["Set target-location to a readable PNG image of monitor content."]
+                [
+                    "Set target-location to a readable PNG image of monitor content, target-environment to a readable panorama, or target-preset to a preset."
+                ]
             ),
         }
     }
@@ -248,9 +257,80 @@ impl LsydRelight {
         Some(result)
     }
 
+    /// The monitor-stream track of a sink pad that is not the face pad.
+    fn track_of(&self, pad: &gst_base::AggregatorPad) -> &Mutex<MonitorTrack> {
+        if lock(&self.target_pad).as_ref() == Some(pad) {
+            &self.target_track
+        } else {
+            &self.monitor
+        }
+    }
+
+    /// The video target's light for the face frame at `face_rt`, aligned by running
+    /// time as the monitor stream is: Some(None) keeps the target in use (no video
+    /// target, or it has not started, stalled or ended); None waits for more data.
+    fn video_target(
+        &self,
+        face_rt: Option<gst::ClockTime>,
+        deadline: bool,
+        settings: &Settings,
+    ) -> Option<Option<Light>> {
+        let Some(pad) = lock(&self.target_pad).clone() else {
+            return Some(None);
+        };
+        let mut reading = Reading::default();
+        let mut track = lock(&self.target_track);
+        let decision = track.consume(
+            &pad,
+            face_rt,
+            deadline,
+            0,
+            settings.monitor_timeout,
+            &mut reading,
+        );
+        self.count(|st| {
+            st.target_stream_frames += reading.frames;
+            if let Some(t) = reading.decoded {
+                st.target_stream_decoded += 1;
+                st.target_stream_light_seconds += t.as_secs_f64();
+            }
+        });
+        let (light, fallback) = match decision {
+            Decision::Wait => return None,
+            Decision::Known(light, _) => (Some(light), None),
+            Decision::Fallback(f) => (None, Some(f)),
+        };
+        let transition = track.note_fallback(fallback);
+        drop(track);
+        match transition {
+            Some(Transition::FallbackStarted(f)) if f != Fallback::NotStarted => {
+                gst::element_imp_warning!(
+                    self,
+                    gst::StreamError::Failed,
+                    (
+                        "Keeping the last target light: {}",
+                        f.describe().replace("monitor", "target")
+                    ),
+                    ["Relighting follows the target stream again as soon as it sends frames."]
+                )
+            }
+            Some(Transition::Returned) => {
+                gst::debug!(CAT, imp = self, "the target stream is back")
+            }
+            _ => gst::trace!(CAT, imp = self, "video target at {}", face_rt.display()),
+        }
+        Some(light)
+    }
+
     /// Brings the policy up to date for the next frame: resets after a break in the
     /// stream, new settings, a new target.
-    fn update_state(&self, state: &mut State, buffer: &gst::Buffer, settings: &Settings) {
+    fn update_state(
+        &self,
+        state: &mut State,
+        buffer: &gst::Buffer,
+        settings: &Settings,
+        video_target: Option<Light>,
+    ) {
         let rt = running_time(&self.face_pad, buffer.pts());
         // A slow stream (1 fps) is not a broken one: a gap counts only beyond a few frames.
         let frame = buffer
@@ -277,23 +357,63 @@ impl LsydRelight {
         state.policy.set_skips(settings.policy_skips());
         let newer = lock(&self.target).newer_than(state.target_generation);
         if let Some((light, generation)) = newer {
-            match state.policy.set_target(&light) {
-                Ok(()) => gst::info!(
-                    CAT,
-                    imp = self,
-                    "target light now {}",
-                    settings.target_location.display()
-                ),
-                Err(e) => gst::element_imp_warning!(
-                    self,
-                    gst::LibraryError::Failed,
-                    (
-                        "Keeping the previous target light: cannot encode the new one: {}",
-                        e
-                    )
-                ),
-            }
+            gst::info!(
+                CAT,
+                imp = self,
+                "target light now {}, fading in over {}",
+                settings.target_source(),
+                settings.target_transition
+            );
+            state
+                .fade
+                .retarget((*light).clone(), settings.target_transition.nseconds());
             state.target_generation = generation;
+        }
+        if let Some(light) = video_target {
+            // A video follows its frames: each is the target at once.
+            state.fade.jump(light);
+        }
+        self.follow_fade(state, rt);
+    }
+
+    /// Gives the policy the target light of the frame at `rt`, mid-fade a blend.
+    fn follow_fade(&self, state: &mut State, rt: Option<gst::ClockTime>) {
+        let Some(light) = state.fade.at(rt.map(|t| t.nseconds())) else {
+            return;
+        };
+        if state.policy.target() == Some(light) {
+            return;
+        }
+        let light = light.clone();
+        let encoding = Instant::now();
+        let encoded = state.policy.set_target(&light);
+        let seconds = encoding.elapsed().as_secs_f64();
+        self.count(|st| st.target_seconds += seconds);
+        if let Err(e) = encoded {
+            gst::element_imp_warning!(
+                self,
+                gst::LibraryError::Failed,
+                (
+                    "Keeping the previous target light: cannot encode the new one: {}",
+                    e
+                )
+            );
+            if let Some(kept) = state.policy.target().cloned() {
+                state.fade.jump(kept);
+            }
+        }
+    }
+
+    /// Applies GstController values (target-yaw and the like) at the face frame's stream time.
+    fn sync_controlled(&self, face: &gst::Buffer) {
+        let segment = self.face_pad.segment();
+        let stream_time = segment
+            .downcast_ref::<gst::ClockTime>()
+            .and_then(|seg| seg.to_stream_time(face.pts()));
+        if let Some(t) = stream_time
+            && self.obj().has_active_control_bindings()
+        {
+            let _ = self.obj().sync_values(t);
         }
     }
 
@@ -308,6 +428,7 @@ impl LsydRelight {
         &self,
         mut buffer: gst::Buffer,
         source: Source,
+        video_target: Option<Light>,
         late: bool,
         settings: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
@@ -329,7 +450,7 @@ impl LsydRelight {
             .face_info
             .clone()
             .ok_or(gst::FlowError::NotNegotiated)?;
-        self.update_state(state, &buffer, settings);
+        self.update_state(state, &buffer, settings, video_target);
         // The prediction shows a blurred view of the user's screen: it is made only
         // for someone who asked for it (or when it is the only source light there is).
         let show_prediction = self.monitor_src.is_linked();
@@ -705,6 +826,8 @@ impl ObjectSubclass for LsydRelight {
             face_pad,
             monitor_src,
             monitor_pad: Mutex::new(None),
+            target_pad: Mutex::new(None),
+            target_track: Mutex::new(MonitorTrack::default()),
             side: Arc::new(SideStream::default()),
             settings: Mutex::new(Settings::default()),
             target: Mutex::new(TargetSlot::default()),
@@ -727,7 +850,8 @@ impl ObjectImpl for LsydRelight {
 
     fn set_property(&self, _id: usize, value: &glib::Value, pspec: &glib::ParamSpec) {
         match pspec.name() {
-            "target-location" => self.set_target_location(value),
+            name @ ("target-location" | "target-preset" | "target-environment" | "target-fov"
+            | "target-yaw" | "target-pitch" | "target-exposure") => self.set_target(name, value),
             "monitor-offset" | "processing-latency" => {
                 lock(&self.settings).set(pspec.name(), value);
                 self.report_latency();
@@ -799,6 +923,14 @@ impl ElementImpl for LsydRelight {
                 )
                 .expect("monitor_sink template"),
                 gst::PadTemplate::with_gtype(
+                    "target_sink",
+                    gst::PadDirection::Sink,
+                    gst::PadPresence::Request,
+                    &video::monitor_caps(),
+                    agg,
+                )
+                .expect("target_sink template"),
+                gst::PadTemplate::with_gtype(
                     "src",
                     gst::PadDirection::Src,
                     gst::PadPresence::Always,
@@ -819,6 +951,19 @@ impl ElementImpl for LsydRelight {
     }
 
     fn release_pad(&self, pad: &gst::Pad) {
+        let mut tp = lock(&self.target_pad);
+        if tp
+            .as_ref()
+            .is_some_and(|p| p.upcast_ref::<gst::Pad>() == pad)
+        {
+            *tp = None;
+            drop(tp);
+            *lock(&self.target_track) = MonitorTrack::default();
+            gst::debug!(CAT, imp = self, "target_sink released");
+            self.parent_release_pad(pad);
+            return;
+        }
+        drop(tp);
         let mut mp = lock(&self.monitor_pad);
         if mp
             .as_ref()
@@ -840,10 +985,10 @@ impl AggregatorImpl for LsydRelight {
         let settings = self.settings();
         let (mut policy, region) = self.start_engine(&settings)?;
         let (target, target_generation) =
-            lock(&self.target).start(&settings.target_location).map_err(|e| {
+            TargetSlot::start(&self.target, &settings.target_source()).map_err(|e| {
                 gst::error_msg!(
                     gst::ResourceError::NotFound,
-                    ["{}; set target-location to a PNG image of monitor content (shipped ones are in models/targets)", e]
+                    ["{}; set target-location to a PNG image of monitor content (shipped ones are in models/targets), target-environment to a panorama, or target-preset", e]
                 )
             })?;
         policy.set_target(&target).map_err(|e| {
@@ -852,16 +997,20 @@ impl AggregatorImpl for LsydRelight {
                 ["cannot encode the target light: {}", e]
             )
         })?;
+        let mut fade = Crossfade::default();
+        fade.jump((*target).clone());
         *lock(&self.state) = Some(State {
             policy,
             region,
             face_info: None,
             last_face_rt: None,
             target_generation,
+            fade,
             nan_warned: false,
         });
         *lock(&self.stats) = Stats::default();
         lock(&self.monitor).restart();
+        lock(&self.target_track).restart();
         self.caps_warned.store(false, Ordering::Relaxed);
         self.side_drop_warned.store(false, Ordering::Relaxed);
         self.start_monitor_watch();
@@ -874,6 +1023,7 @@ impl AggregatorImpl for LsydRelight {
         self.qos.reset();
         *lock(&self.state) = None;
         *lock(&self.monitor) = MonitorTrack::default();
+        *lock(&self.target_track) = MonitorTrack::default();
         self.side.clear();
         Ok(())
     }
@@ -893,19 +1043,22 @@ impl AggregatorImpl for LsydRelight {
         _req_name: Option<&str>,
         _caps: Option<&gst::Caps>,
     ) -> Option<gst_base::AggregatorPad> {
-        if templ.name_template() != "monitor_sink" {
-            return None;
-        }
-        let mut mp = lock(&self.monitor_pad);
-        if mp.is_some() {
-            gst::warning!(CAT, imp = self, "only one monitor_sink pad");
+        let name = templ.name_template();
+        let slot = match name {
+            "monitor_sink" => &self.monitor_pad,
+            "target_sink" => &self.target_pad,
+            _ => return None,
+        };
+        let mut held = lock(slot);
+        if held.is_some() {
+            gst::warning!(CAT, imp = self, "only one {name} pad");
             return None;
         }
         let pad = gst::PadBuilder::<gst_base::AggregatorPad>::from_template(templ)
-            .name("monitor_sink")
+            .name(name)
             .build();
-        *mp = Some(pad.clone());
-        gst::debug!(CAT, imp = self, "monitor_sink requested");
+        *held = Some(pad.clone());
+        gst::debug!(CAT, imp = self, "{name} requested");
         Some(pad)
     }
 
@@ -928,8 +1081,8 @@ impl AggregatorImpl for LsydRelight {
                     return false;
                 };
                 if !is_face {
-                    gst::debug!(CAT, imp = self, "monitor caps {}", c.caps());
-                    lock(&self.monitor).set_info(info);
+                    gst::debug!(CAT, imp = self, "{} caps {}", pad.name(), c.caps());
+                    lock(self.track_of(pad)).set_info(info);
                     return self.parent_sink_event(pad, event);
                 }
                 if let Some(problem) = face_size_problem(&info) {
@@ -982,7 +1135,7 @@ impl AggregatorImpl for LsydRelight {
                 self.reset_state("flush");
             }
             EventView::FlushStop(_) => {
-                lock(&self.monitor).flush();
+                lock(self.track_of(pad)).flush();
             }
             _ => {}
         }
@@ -1090,9 +1243,13 @@ impl AggregatorImpl for LsydRelight {
             self.forward_gap(&face);
             return Ok(gst::FlowSuccess::Ok);
         }
+        self.sync_controlled(&face);
         let settings = self.settings();
         let face_rt = running_time(&self.face_pad, face.pts());
         let Some((source, monitor_rt)) = self.source_light(face_rt, timeout, &settings) else {
+            return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
+        };
+        let Some(video_target) = self.video_target(face_rt, timeout, &settings) else {
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
         };
         let buffer = self
@@ -1104,7 +1261,7 @@ impl AggregatorImpl for LsydRelight {
             && self
                 .qos
                 .is_late(element.upcast_ref(), face_rt, buffer.duration());
-        let mut out = self.process_frame(buffer, source, late, &settings)?;
+        let mut out = self.process_frame(buffer, source, video_target, late, &settings)?;
         if late {
             let (relit, reused) = {
                 let st = lock(&self.stats);

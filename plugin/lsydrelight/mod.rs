@@ -10,6 +10,11 @@
 //!   Each face frame uses the monitor frame shown at its running time minus `monitor-offset`.
 //!   Without this pad, or while the monitor stream is stalled or over, the source light is
 //!   predicted from the face (unknown-source mode).
+//! - `target_sink` (request): a video whose frames are the target light (monitor content,
+//!   e.g. the virtual background the person appears in front of), aligned by running time
+//!   as `monitor_sink` is. Its light is computed once per frame it shows; while it has not
+//!   started the target properties hold, and when it stalls or ends its last frame stays
+//!   the target (one warning says so).
 //! - `src`: the relit video, in the face video's caps. A frame relit with the monitor's
 //!   light carries a `GstReferenceTimestampMeta` with caps `timestamp/x-lsydrelight-monitor`
 //!   holding that monitor frame's running time.
@@ -49,6 +54,17 @@
 //!     ximagesrc use-damage=false ! video/x-raw,framerate=10/1 ! videoconvert ! r.monitor_sink \
 //!     r.src ! queue ! autovideosink \
 //!     r.monitor_src ! queue ! videoscale ! autovideosink
+//! ```
+//!
+//! Targets: a preset (`target-preset=sunset`), an environment map seen through the monitor
+//! (`target-environment=room.exr target-fov=180 target-yaw=90 target-exposure=-1`) or a
+//! PNG of monitor content (`target-location`), in that order of precedence. A change while
+//! playing crossfades over `target-transition`. A virtual background that lights the face:
+//!
+//! ```text
+//! gst-launch-1.0 -e lsydrelight name=r v4l2src ! videoconvert ! r.sink \
+//!     filesrc location=background.mp4 ! decodebin ! videoconvert ! r.target_sink \
+//!     r.src ! videoconvert ! autovideosink
 //! ```
 //!
 //! A webcam alone (the source light is predicted), to a virtual camera for OBS or calls:
@@ -94,6 +110,7 @@ pub enum ExecutionProvider {
 
 pub fn register(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {
     ExecutionProvider::static_type().mark_as_plugin_api(gst::PluginAPIFlags::empty());
+    crate::targets::Preset::static_type().mark_as_plugin_api(gst::PluginAPIFlags::empty());
     gst::Element::register(
         Some(plugin),
         "lsydrelight",

@@ -9,9 +9,11 @@ use gst::glib;
 use gst::prelude::*;
 
 use super::ExecutionProvider;
+use super::target::TargetSource;
 use crate::engine::{Skips, Temporal};
 use crate::monitor_match::MatchSettings;
 use crate::paths;
+use crate::targets::{Preset, View, panorama};
 
 pub const DEFAULT_THREADS: u32 = 2;
 const MAX_MONITOR_OFFSET: i64 = 10_000_000_000;
@@ -24,6 +26,8 @@ const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
 const DEFAULT_FEATHER: f64 = 0.25;
 const DEFAULT_QOS: bool = true;
+const DEFAULT_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_mseconds(500);
+const MAX_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_seconds(60);
 
 /// The square face region, as fractions of the frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -41,6 +45,13 @@ pub struct Settings {
     pub provider: ExecutionProvider,
     pub threads: u32,
     pub target_location: PathBuf,
+    pub target_preset: Preset,
+    /// An equirectangular environment map; empty for none.
+    pub target_environment: PathBuf,
+    /// How the monitor looks into the environment map.
+    pub target_view: View,
+    /// Face running time over which a new target fades in.
+    pub target_transition: gst::ClockTime,
     /// Nanoseconds by which the monitor content that lit a face frame precedes it.
     pub monitor_offset: i64,
     pub monitor_timeout: gst::ClockTime,
@@ -71,6 +82,10 @@ impl Default for Settings {
             provider: ExecutionProvider::Cpu,
             threads: DEFAULT_THREADS,
             target_location: paths::default_target(),
+            target_preset: Preset::None,
+            target_environment: PathBuf::new(),
+            target_view: View::default(),
+            target_transition: DEFAULT_TARGET_TRANSITION,
             monitor_offset: 0,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
             processing_latency: DEFAULT_PROCESSING_LATENCY,
@@ -111,6 +126,17 @@ impl Settings {
         }
     }
 
+    /// The target the settings name: a preset, else an environment map, else the image.
+    pub fn target_source(&self) -> TargetSource {
+        if self.target_preset != Preset::None {
+            TargetSource::Preset(self.target_preset)
+        } else if !self.target_environment.as_os_str().is_empty() {
+            TargetSource::Environment(self.target_environment.clone(), self.target_view)
+        } else {
+            TargetSource::Image(self.target_location.clone())
+        }
+    }
+
     /// Sets a property by name; false for a name that is not a setting (the
     /// element handles those: `stats`).
     pub fn set(&mut self, name: &str, v: &glib::Value) -> bool {
@@ -121,6 +147,15 @@ impl Settings {
             "execution-provider" => self.provider = v.get().expect(checked),
             "threads" => self.threads = v.get().expect(checked),
             "target-location" => self.target_location = path_of(v),
+            "target-preset" => self.target_preset = v.get().expect(checked),
+            "target-environment" => self.target_environment = path_of(v),
+            "target-fov" => self.target_view.fov = v.get().expect(checked),
+            "target-yaw" => self.target_view.yaw = v.get().expect(checked),
+            "target-pitch" => self.target_view.pitch = v.get().expect(checked),
+            "target-exposure" => self.target_view.exposure = v.get().expect(checked),
+            "target-transition" => {
+                self.target_transition = gst::ClockTime::from_nseconds(v.get().expect(checked))
+            }
             "monitor-offset" => self.monitor_offset = v.get().expect(checked),
             "monitor-timeout" => {
                 self.monitor_timeout = gst::ClockTime::from_nseconds(v.get().expect(checked))
@@ -172,6 +207,13 @@ impl Settings {
             "execution-provider" => self.provider.to_value(),
             "threads" => self.threads.to_value(),
             "target-location" => path_value(&self.target_location),
+            "target-preset" => self.target_preset.to_value(),
+            "target-environment" => path_value(&self.target_environment),
+            "target-fov" => self.target_view.fov.to_value(),
+            "target-yaw" => self.target_view.yaw.to_value(),
+            "target-pitch" => self.target_view.pitch.to_value(),
+            "target-exposure" => self.target_view.exposure.to_value(),
+            "target-transition" => self.target_transition.nseconds().to_value(),
             "monitor-offset" => self.monitor_offset.to_value(),
             "monitor-timeout" => self.monitor_timeout.nseconds().to_value(),
             "processing-latency" => self.processing_latency.nseconds().to_value(),
@@ -236,8 +278,61 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecString::builder("target-location")
                 .nick("Target light")
-                .blurb("PNG image of the monitor content to relight to (as a screen capture would show it); can change while playing")
+                .blurb("PNG image of the monitor content to relight to (as a screen capture would show it); used when target-preset is none and target-environment is empty; can change while playing (default: the shipped models/targets/studio.png)")
                 .default_value(Some(path(&d.target_location).as_str()))
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecEnum::builder_with_default("target-preset", d.target_preset)
+                .nick("Target preset")
+                .blurb("A built-in target light, as monitor content; takes precedence over target-environment and target-location; none (the default) uses those; can change while playing")
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecString::builder("target-environment")
+                .nick("Target environment map")
+                .blurb("Equirectangular panorama (Radiance .hdr, OpenEXR .exr, PNG or JPEG; twice as wide as high, its centre straight ahead) whose part in front of the viewer is the target monitor light; used when target-preset is none; empty (the default) for none; can change while playing")
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecDouble::builder("target-fov")
+                .nick("Environment field of view")
+                .blurb("Degrees of the environment map the monitor shows across (vertically half as many), as the paper's 180-degree monitor light (default 180)")
+                .minimum(1.0)
+                .maximum(360.0)
+                .default_value(panorama::DEFAULT_FOV)
+                .mutable_playing()
+                .controllable()
+                .build(),
+            glib::ParamSpecDouble::builder("target-yaw")
+                .nick("Environment yaw")
+                .blurb("Degrees the viewer turns to the right in the environment map (the picture moves left); animatable with GstController (default 0)")
+                .minimum(-360.0)
+                .maximum(360.0)
+                .default_value(0.0)
+                .mutable_playing()
+                .controllable()
+                .build(),
+            glib::ParamSpecDouble::builder("target-pitch")
+                .nick("Environment pitch")
+                .blurb("Degrees the view tilts up in the environment map; animatable with GstController (default 0)")
+                .minimum(-90.0)
+                .maximum(90.0)
+                .default_value(0.0)
+                .mutable_playing()
+                .controllable()
+                .build(),
+            glib::ParamSpecDouble::builder("target-exposure")
+                .nick("Environment exposure")
+                .blurb("Stops by which the environment map's linear light is scaled before it is clipped to the monitor's range [0, 1] (its tone mapping); animatable (default 0)")
+                .minimum(-20.0)
+                .maximum(20.0)
+                .default_value(0.0)
+                .mutable_playing()
+                .controllable()
+                .build(),
+            glib::ParamSpecUInt64::builder("target-transition")
+                .nick("Target transition")
+                .blurb("Nanoseconds of the face stream's running time over which a new target light (preset, file, environment map or its view) crossfades in; 0 jumps (default 500000000: half a second)")
+                .maximum(MAX_TARGET_TRANSITION.nseconds())
+                .default_value(DEFAULT_TARGET_TRANSITION.nseconds())
                 .mutable_playing()
                 .build(),
             glib::ParamSpecInt64::builder("monitor-offset")
@@ -250,7 +345,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecUInt64::builder("monitor-timeout")
                 .nick("Monitor timeout")
-                .blurb("Nanoseconds a monitor frame stays on screen without a newer one (or its duration, if longer); after that the monitor stream counts as stalled and the predicted light is used. In a non-live pipeline, also how long face frames wait for a monitor stream that sends nothing before a warning says so")
+                .blurb("Nanoseconds a monitor frame stays on screen without a newer one (or its duration, if longer); after that the monitor stream counts as stalled and the predicted light is used (a target_sink stream's frame, as stalled, and its last frame stays the target). In a non-live pipeline, also how long face frames wait for a monitor stream that sends nothing before a warning says so")
                 .default_value(DEFAULT_MONITOR_TIMEOUT.nseconds())
                 .mutable_playing()
                 .build(),
@@ -443,6 +538,30 @@ pub fn properties() -> &'static [glib::ParamSpec] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_preset_overrides_an_environment_map_which_overrides_the_image() {
+        let mut settings = Settings::default();
+        assert_eq!(
+            settings.target_source(),
+            TargetSource::Image(settings.target_location.clone())
+        );
+        settings.target_environment = PathBuf::from("room.exr");
+        settings.target_view.yaw = 30.0;
+        let view = View {
+            yaw: 30.0,
+            ..View::default()
+        };
+        assert_eq!(
+            settings.target_source(),
+            TargetSource::Environment(PathBuf::from("room.exr"), view)
+        );
+        settings.target_preset = Preset::Candle;
+        assert_eq!(
+            settings.target_source(),
+            TargetSource::Preset(Preset::Candle)
+        );
+    }
 
     #[test]
     fn the_presence_check_runs_only_for_a_fixed_region() {

@@ -21,6 +21,14 @@ pub struct Stats {
     pub monitor_decoded: u64,
     pub monitor_out: u64,
     pub monitor_dropped: u64,
+    /// Target-stream frames that arrived, and those whose light was computed (the
+    /// ones face frames used), and the seconds that took.
+    pub target_stream_frames: u64,
+    pub target_stream_decoded: u64,
+    pub target_stream_light_seconds: f64,
+    /// Seconds encoding target lights on the streaming thread (first targets,
+    /// crossfades, video targets).
+    pub target_seconds: f64,
     /// Face detector runs, and seconds following the face (detector and tracker).
     pub face_detections: u64,
     pub face_seconds: f64,
@@ -59,6 +67,13 @@ impl Stats {
             .field("monitor-out", self.monitor_out)
             .field("monitor-dropped", self.monitor_dropped)
             .field("target-encodes", p.target_encodes)
+            .field("target-seconds", self.target_seconds)
+            .field("target-stream-frames", self.target_stream_frames)
+            .field("target-stream-decoded", self.target_stream_decoded)
+            .field(
+                "target-stream-light-seconds",
+                self.target_stream_light_seconds,
+            )
             .field("light-predictions", p.predictions)
             .field("non-finite", p.passed_non_finite)
             .build()

@@ -1,12 +1,42 @@
-//! The target light the user chose with `target-location`. It is decoded on
-//! the application's thread when the property is set, so a change while
-//! playing never stalls a frame; the streaming thread only encodes it, when
-//! its generation is newer than the one the stream has.
+//! The target light the user chose: a preset (`target-preset`), an environment
+//! map seen through the monitor (`target-environment` with `target-fov`,
+//! `target-yaw`, `target-pitch`, `target-exposure`), or a PNG of monitor content
+//! (`target-location`), in that order of precedence. It is resolved on the
+//! thread that sets the property, so a change while playing never stalls a
+//! frame; the streaming thread only fades to it and encodes it, when its
+//! generation is newer than the one the stream has.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use crate::light::Light;
+use crate::targets::{Panorama, Preset, View};
+
+/// Which target the settings name.
+#[derive(Clone, Debug, PartialEq)]
+pub enum TargetSource {
+    Preset(Preset),
+    Environment(PathBuf, View),
+    Image(PathBuf),
+}
+
+impl std::fmt::Display for TargetSource {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            TargetSource::Preset(p) => write!(f, "preset {}", p.nick()),
+            TargetSource::Environment(path, v) => write!(
+                f,
+                "environment map {} (fov {}, yaw {}, pitch {}, exposure {})",
+                path.display(),
+                v.fov,
+                v.yaw,
+                v.pitch,
+                v.exposure
+            ),
+            TargetSource::Image(path) => write!(f, "{}", path.display()),
+        }
+    }
+}
 
 #[derive(Default)]
 pub struct TargetSlot {
@@ -15,9 +45,11 @@ pub struct TargetSlot {
     generation: u64,
     /// Between start and stop: a target that cannot be read keeps the previous one.
     streaming: bool,
+    /// The last environment map read, so a new yaw only projects it again.
+    panorama: Option<(PathBuf, Arc<Panorama>)>,
 }
 
-/// What became of a new target location.
+/// What became of a new target.
 pub enum Update {
     Applied,
     /// Stopped: the error surfaces when the element starts.
@@ -27,13 +59,43 @@ pub enum Update {
 }
 
 impl TargetSlot {
-    /// Takes a newly decoded (or failed) target; the check of whether the element
+    /// The environment map at `path`, read once and kept while the path stays.
+    /// `slot` is locked only to look and to keep, never while a file is read.
+    fn panorama(slot: &std::sync::Mutex<TargetSlot>, path: &Path) -> Result<Arc<Panorama>, String> {
+        let cached = lock(slot)
+            .panorama
+            .as_ref()
+            .filter(|(p, _)| p == path)
+            .map(|(_, pano)| pano.clone());
+        if let Some(pano) = cached {
+            return Ok(pano);
+        }
+        let pano = Arc::new(Panorama::open(path)?);
+        lock(slot).panorama = Some((path.to_owned(), pano.clone()));
+        Ok(pano)
+    }
+
+    /// The light `source` names, reading files as needed (outside the lock).
+    pub fn resolve(
+        slot: &std::sync::Mutex<TargetSlot>,
+        source: &TargetSource,
+    ) -> Result<Light, String> {
+        match source {
+            TargetSource::Preset(p) => Ok(p.light()),
+            TargetSource::Environment(path, view) => Ok(Self::panorama(slot, path)?.light(view)),
+            TargetSource::Image(path) => Light::from_png(path),
+        }
+    }
+
+    /// Takes a newly resolved (or failed) target; the check of whether the element
     /// streams and the change happen under the caller's one lock.
     pub fn update(&mut self, decoded: Result<Light, String>) -> Update {
         match decoded {
             Ok(light) => {
-                self.decoded = Some(Arc::new(light));
-                self.generation += 1;
+                if self.decoded.as_deref() != Some(&light) {
+                    self.decoded = Some(Arc::new(light));
+                    self.generation += 1;
+                }
                 Update::Applied
             }
             Err(e) if self.streaming => Update::KeptPrevious(e),
@@ -44,18 +106,21 @@ impl TargetSlot {
         }
     }
 
-    /// The target to start with, decoding `location` if nothing is decoded yet,
+    /// The target to start with, resolving `source` if nothing is resolved yet,
     /// and its generation.
-    pub fn start(&mut self, location: &Path) -> Result<(Arc<Light>, u64), String> {
-        if self.decoded.is_none() {
-            self.decoded = Some(Arc::new(Light::from_png(location)?));
-            self.generation += 1;
+    pub fn start(
+        slot: &std::sync::Mutex<TargetSlot>,
+        source: &TargetSource,
+    ) -> Result<(Arc<Light>, u64), String> {
+        if lock(slot).decoded.is_none() {
+            let light = Self::resolve(slot, source)?;
+            let mut s = lock(slot);
+            s.decoded = Some(Arc::new(light));
+            s.generation += 1;
         }
-        self.streaming = true;
-        Ok((
-            self.decoded.clone().expect("decoded above"),
-            self.generation,
-        ))
+        let mut s = lock(slot);
+        s.streaming = true;
+        Ok((s.decoded.clone().expect("resolved above"), s.generation))
     }
 
     pub fn stop(&mut self) {
@@ -68,4 +133,8 @@ impl TargetSlot {
             .then(|| self.decoded.clone().map(|l| (l, self.generation)))
             .flatten()
     }
+}
+
+fn lock<T>(m: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
 }

@@ -13,6 +13,7 @@ use crate::exit::Failure;
 enum Origin {
     Face,
     Screen,
+    Target,
     Relight,
     Out,
     Predicted,
@@ -26,6 +27,7 @@ fn origin(src: Option<&gst::Object>) -> Origin {
         for (prefix, origin) in [
             ("face-", Origin::Face),
             ("screen-", Origin::Screen),
+            ("target-", Origin::Target),
             ("relight", Origin::Relight),
             ("out-", Origin::Out),
             ("predicted-", Origin::Predicted),
@@ -63,6 +65,10 @@ pub fn error(e: &gst::message::Error, files: &Files, missing_plugins: &[String])
     match origin(e.src()) {
         Origin::Face => input("--face", &files.face),
         Origin::Screen => input("--screen", files.screen.as_deref().unwrap_or(Path::new(""))),
+        Origin::Target => input(
+            "--target",
+            files.target_video.as_deref().unwrap_or(Path::new("")),
+        ),
         Origin::Relight => Failure::new(format!(
             "cannot relight: {}",
             element_text(e.error(), e.debug())
@@ -133,4 +139,6 @@ fn element_text(error: gst::glib::Error, debug: Option<gst::glib::GString>) -> S
     };
     text.replace("model-location", "--model")
         .replace("target-location", "--target")
+        .replace("target-environment", "--target")
+        .replace("target-preset", "--target")
 }

@@ -14,7 +14,7 @@ use crate::progress::Bars;
 const STATUS_COLUMN: usize = 11;
 
 /// What counts as a recording in a folder; other files are left alone.
-const RECORDING_EXTENSIONS: [&str; 9] = [
+pub const RECORDING_EXTENSIONS: [&str; 9] = [
     "mp4", "mkv", "mov", "webm", "avi", "m4v", "ts", "y4m", "ogv",
 ];
 
@@ -150,6 +150,7 @@ fn files_of(args: &Args, face: &Path, screens: Option<&[PathBuf]>) -> Result<Fil
     Ok(Files {
         face: face.to_path_buf(),
         screen,
+        target_video: args.target.as_deref().map(PathBuf::from),
         out: output(&args.out),
         predicted: args.predicted_monitor.as_deref().map(output),
     })

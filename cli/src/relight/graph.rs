@@ -18,6 +18,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use gst::prelude::*;
 
 use super::job::{Files, Settings};
+use super::target::Target;
 use crate::exit::Failure;
 
 /// The output container, chosen by the output's file extension.
@@ -100,7 +101,7 @@ pub fn build(
         relight.set_property("model-location", utf8(model)?);
     }
     if let Some(target) = &settings.target {
-        relight.set_property("target-location", utf8(target)?);
+        target.apply(&relight)?;
     }
     relight.set_property("monitor-offset", settings.monitor_offset_ns);
     pipeline.add(&relight).map_err(internal)?;
@@ -116,7 +117,10 @@ pub fn build(
     )?;
     face_input(&pipeline, &relight, &files.face, &mux, files.out.container)?;
     if let Some(screen) = &files.screen {
-        screen_input(&pipeline, &relight, screen)?;
+        video_input(&pipeline, &relight, screen, Side::Screen)?;
+    }
+    if let Some(Target::Video(video)) = &settings.target {
+        video_input(&pipeline, &relight, video, Side::Target)?;
     }
     if let (Some(temp), Some(dest)) = (predicted, &files.predicted) {
         encode(
@@ -253,25 +257,52 @@ fn keep_stream(
     Ok(())
 }
 
-/// `filesrc ! decodebin`: its video into the element's monitor input; other
-/// streams of the screen recording are not needed and are discarded.
-fn screen_input(
+/// A second video into the element: the screen recording, or a video target.
+#[derive(Clone, Copy)]
+enum Side {
+    Screen,
+    Target,
+}
+
+impl Side {
+    /// The prefix of its elements' names (`diagnose` reads it) and its pad.
+    fn names(self) -> (&'static str, &'static str, &'static str) {
+        match self {
+            Side::Screen => (
+                "screen",
+                "monitor_sink",
+                "no video stream; pass the screen recording of what the monitor showed",
+            ),
+            Side::Target => (
+                "target",
+                "target_sink",
+                "no video stream; pass a video whose frames are the target light",
+            ),
+        }
+    }
+}
+
+/// `filesrc ! decodebin`: its video into the element's `monitor_sink` or
+/// `target_sink`; other streams of the recording are not needed and are discarded.
+fn video_input(
     pipeline: &gst::Pipeline,
     relight: &gst::Element,
     path: &Path,
+    side: Side,
 ) -> Result<(), Failure> {
-    let src = make("filesrc", "screen-src")?;
+    let (prefix, pad, no_video) = side.names();
+    let src = make("filesrc", &format!("{prefix}-src"))?;
     src.set_property("location", utf8(path)?);
-    let decode = make("decodebin", "screen-decode")?;
-    let convert = make("videoconvert", "screen-convert")?;
-    let queue = make("queue", "screen-queue")?;
+    let decode = make("decodebin", &format!("{prefix}-decode"))?;
+    let convert = make("videoconvert", &format!("{prefix}-convert"))?;
+    let queue = make("queue", &format!("{prefix}-queue"))?;
     pipeline
         .add_many([&src, &decode, &convert, &queue])
         .map_err(internal)?;
     src.link(&decode).map_err(internal)?;
     gst::Element::link_many([&convert, &queue]).map_err(internal)?;
     queue
-        .link_pads(None, relight, Some("monitor_sink"))
+        .link_pads(None, relight, Some(pad))
         .map_err(internal)?;
     link_first_video(&decode, &convert);
     let convert_weak = convert.downgrade();
@@ -281,11 +312,7 @@ fn screen_input(
             .and_then(|c| c.static_pad("sink"))
             .is_some_and(|p| !p.is_linked())
         {
-            own_error(
-                decode,
-                gst::StreamError::WrongType,
-                "no video stream; pass the screen recording of what the monitor showed",
-            );
+            own_error(decode, gst::StreamError::WrongType, no_video);
         }
     });
     Ok(())

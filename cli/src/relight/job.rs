@@ -17,7 +17,7 @@ use crate::progress::{Bar, Bars};
 /// What every recording of a run is relit with.
 pub struct Settings {
     pub model: Option<PathBuf>,
-    pub target: Option<PathBuf>,
+    pub target: Option<super::target::Target>,
     pub monitor_offset_ns: i64,
     pub quality: u32,
 }
@@ -38,6 +38,8 @@ impl Output {
 pub struct Files {
     pub face: PathBuf,
     pub screen: Option<PathBuf>,
+    /// `--target` when it names a file, for messages about a video target.
+    pub target_video: Option<PathBuf>,
     pub out: Output,
     pub predicted: Option<Output>,
 }

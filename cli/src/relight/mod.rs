@@ -6,6 +6,7 @@ mod diagnose;
 mod folder;
 mod graph;
 mod job;
+mod target;
 
 use std::path::{Path, PathBuf};
 
@@ -13,13 +14,15 @@ use crate::exit::{Failure, Status};
 use crate::progress::Bars;
 use graph::Container;
 use job::{Files, Outcome, Output, Settings};
+use target::{Target, ViewArgs};
 
 /// Relight recorded calls: the face video relit to a target light; audio and other streams kept as they are
 #[derive(clap::Args)]
 #[command(
-    override_usage = "lsydrelight relight --face FILE [--screen FILE [--offset SECONDS]] [--target FILE] \
+    override_usage = "lsydrelight relight --face FILE [--screen FILE [--offset SECONDS]] \
+        [--target PRESET|FILE [--fov DEG] [--yaw DEG] [--pitch DEG] [--exposure STOPS]] \
         [--model DIR] [--quality N] [--predicted-monitor FILE] --out FILE\n       \
-        lsydrelight relight --face DIR [--screen DIR [--offset SECONDS]] [--target FILE] \
+        lsydrelight relight --face DIR [--screen DIR [--offset SECONDS]] [--target PRESET|FILE] \
         [--model DIR] [--quality N] [--predicted-monitor DIR] [--container FORMAT] [--jobs N] --out DIR",
     long_about = "Relight recorded calls: the face video relit to a target light; audio and \
         other streams kept as they are.\n\n\
@@ -37,6 +40,9 @@ use job::{Files, Outcome, Output, Settings};
   lsydrelight relight --face call.mp4 --out relit.mp4
   lsydrelight relight --face examples/data/call/face.mp4 --screen examples/data/call/monitor.mp4 \\
       --target models/targets/sunset.png --predicted-monitor monitor.mp4 --out relit.mp4
+  lsydrelight relight --face call.mp4 --target warm-key-left --out relit.mp4
+  lsydrelight relight --face call.mp4 --target room.exr --yaw 90 --exposure -1 --out relit.mp4
+  lsydrelight relight --face call.mp4 --target background.mp4 --out relit.mp4
   lsydrelight relight --face calls/ --out relit/ --jobs 2
 
 ",
@@ -65,9 +71,30 @@ pub struct Args {
     )]
     offset: f64,
 
-    /// The target light: a PNG of monitor content [default: models/targets/studio.png]
-    #[arg(long, value_name = "FILE")]
-    target: Option<PathBuf>,
+    /// The target light [default: models/targets/studio.png]: a preset (soft-front,
+    /// warm-key-left, cool-key-right, rim, sunset, office, overcast, candle, neon), a PNG of
+    /// monitor content, an environment map (.hdr, .exr; a PNG/JPEG panorama with --fov, --yaw,
+    /// --pitch or --exposure), or a video whose frames light the face as they play (a virtual
+    /// background; its last frame stays when it ends)
+    #[arg(long, value_name = "PRESET|FILE")]
+    target: Option<String>,
+
+    /// Degrees of the environment map the monitor shows across (half as many up and down) [default: 180]
+    #[arg(long, value_name = "DEG", value_parser = clap::value_parser!(f64))]
+    fov: Option<f64>,
+
+    /// Degrees the viewer turns to the right in the environment map [default: 0]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    yaw: Option<f64>,
+
+    /// Degrees the view tilts up in the environment map [default: 0]
+    #[arg(long, value_name = "DEG", allow_negative_numbers = true)]
+    pitch: Option<f64>,
+
+    /// Stops by which the environment map is brightened before it is clipped to the
+    /// monitor's range [default: 0]
+    #[arg(long, value_name = "STOPS", allow_negative_numbers = true)]
+    exposure: Option<f64>,
 
     /// The personalised model's folder [default: models/default]
     #[arg(long, value_name = "DIR")]
@@ -174,6 +201,7 @@ fn single_files(args: &Args) -> Result<Files, Failure> {
     Ok(Files {
         face: args.face.clone(),
         screen: args.screen.clone(),
+        target_video: args.target.as_deref().map(PathBuf::from),
         out,
         predicted,
     })
@@ -213,12 +241,44 @@ fn check_inputs(args: &Args) -> Result<(), Failure> {
 /// What every recording is relit with, checked before anything runs.
 fn settings(args: &Args) -> Result<Settings, Failure> {
     check_model(args.model.as_deref())?;
-    if let Some(target) = &args.target {
-        check_png(target)?;
+    let view = ViewArgs {
+        fov: args.fov,
+        yaw: args.yaw,
+        pitch: args.pitch,
+        exposure: args.exposure,
+    };
+    for (flag, value, range) in [
+        ("--fov", view.fov, 1.0..=360.0),
+        ("--yaw", view.yaw, -360.0..=360.0),
+        ("--pitch", view.pitch, -90.0..=90.0),
+        ("--exposure", view.exposure, -20.0..=20.0),
+    ] {
+        if let Some(v) = value
+            && !range.contains(&v)
+        {
+            return Err(Failure::usage(format!(
+                "{flag} {v} is outside {} to {}",
+                range.start(),
+                range.end()
+            )));
+        }
     }
+    let target = match &args.target {
+        Some(t) => Some(Target::parse(t, view)?),
+        None if view.fov.is_some()
+            || view.yaw.is_some()
+            || view.pitch.is_some()
+            || view.exposure.is_some() =>
+        {
+            return Err(Failure::usage(
+                "--fov, --yaw, --pitch and --exposure need an environment map as --target",
+            ));
+        }
+        None => None,
+    };
     Ok(Settings {
         model: args.model.clone(),
-        target: args.target.clone(),
+        target,
         monitor_offset_ns: (args.offset * 1e9).round() as i64,
         quality: args.quality,
     })
@@ -240,23 +300,6 @@ fn check_model(model: Option<&Path>) -> Result<(), Failure> {
             dir.display()
         ),
     }))
-}
-
-fn check_png(path: &Path) -> Result<(), Failure> {
-    use std::io::Read;
-    const SIGNATURE: &[u8] = b"\x89PNG\r\n\x1a\n";
-    let mut head = Vec::new();
-    std::fs::File::open(path)
-        .and_then(|f| f.take(SIGNATURE.len() as u64).read_to_end(&mut head))
-        .map_err(|e| Failure::new(format!("--target {}: {e}", path.display())))?;
-    if head != SIGNATURE {
-        return Err(Failure::new(format!(
-            "--target {}: not a PNG image; pass a PNG of monitor content (shipped ones are in \
-             models/targets)",
-            path.display()
-        )));
-    }
-    Ok(())
 }
 
 fn same_file(a: &Path, b: &Path) -> bool {

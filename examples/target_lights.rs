@@ -1,0 +1,439 @@
+//! Every kind of target light, shown and measured: the README's contact sheet
+//! of the presets, its picture of how an environment map becomes a monitor
+//! light, the error of relighting to each against the simulator's exact ground
+//! truth, and what target changes and video targets cost.
+//!
+//! ```text
+//! cargo run --example target_lights -- sheet results/targets/presets.png
+//! cargo run --example target_lights -- projection results/targets/environment.png
+//! cargo run --example target_lights -- measure [--frames 60] [--model models/default]
+//! cargo run --example target_lights -- timing
+//! ```
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use deskstage::content::{FRAME_HEIGHT, FRAME_WIDTH};
+use deskstage::dataset::{Recording, RecordingSpec, light_of};
+use deskstage::math::Vec3;
+use deskstage::monitor::RgbImage;
+use deskstage::subject::State;
+use gst::prelude::*;
+use gst_check::Harness;
+use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, Light};
+use gstlsydrelight::targets::{Panorama, Preset, View};
+use lsydrelight_testkit::{
+    checkout, default_model,
+    element::{element, stat},
+    flags::flag,
+    person::render_person,
+    recording::score_recording,
+    video::{FRAME, buffer, frame_time, rgb_caps, to_rgb},
+};
+
+fn main() -> Result<(), String> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let out = args.get(1).map(PathBuf::from);
+    match args.first().map(String::as_str) {
+        Some("sheet") => sheet(&out.ok_or("sheet OUT.png")?),
+        Some("projection") => projection(&out.ok_or("projection OUT.png")?),
+        Some("measure") => measure(),
+        Some("timing") => timing(),
+        _ => {
+            Err("usage: target_lights sheet OUT.png | projection OUT.png | measure | timing".into())
+        }
+    }
+}
+
+/// A synthetic outdoor panorama in linear light, 2:1: a blue sky brighter at the
+/// horizon, a sun 60 degrees to the right and 25 up, green ground, a red wall to
+/// the left and a white window behind.
+fn outdoor_panorama(width: usize) -> Panorama {
+    let height = width / 2;
+    let mut rgb = Vec::with_capacity(width * height);
+    for y in 0..height {
+        let lat = 90.0 - (y as f64 + 0.5) / height as f64 * 180.0;
+        for x in 0..width {
+            let lon = (x as f64 + 0.5) / width as f64 * 360.0 - 180.0;
+            let sun = ((lon - 60.0).powi(2) + (lat - 25.0).powi(2)).sqrt() < 4.0;
+            let wall = (-120.0..-60.0).contains(&lon) && (-20.0..30.0).contains(&lat);
+            let window = (lon.abs() > 160.0) && (0.0..40.0).contains(&lat);
+            let p: [f32; 3] = if sun {
+                [40.0, 32.0, 20.0]
+            } else if wall {
+                [0.7, 0.12, 0.08]
+            } else if window {
+                [1.5, 1.5, 1.5]
+            } else if lat > 0.0 {
+                let t = (lat / 90.0) as f32;
+                [0.35 - 0.25 * t, 0.5 - 0.25 * t, 0.8 - 0.2 * t]
+            } else {
+                [0.08, 0.2, 0.05]
+            };
+            rgb.push(p);
+        }
+    }
+    Panorama::from_linear(width, height, rgb).expect("a valid panorama")
+}
+
+/// Writes the panorama as OpenEXR (for the element, which reads files).
+fn write_exr(pano_width: usize, path: &Path) -> Result<(), String> {
+    let pano = outdoor_panorama(pano_width);
+    let h = pano_width / 2;
+    let img = image::Rgb32FImage::from_fn(pano_width as u32, h as u32, |x, y| {
+        image::Rgb(pano.pixel(x as usize, y as usize))
+    });
+    std::fs::create_dir_all(path.parent().unwrap()).map_err(|e| e.to_string())?;
+    img.save_with_format(path, image::ImageFormat::OpenExr)
+        .map_err(|e| e.to_string())
+}
+
+/// Linear light in [0, 1] as an 8-bit sRGB value.
+fn srgb_byte(v: f32) -> u8 {
+    let v = v.clamp(0.0, 1.0);
+    let s = if v <= 0.003_130_8 {
+        v * 12.92
+    } else {
+        1.055 * v.powf(1.0 / 2.4) - 0.055
+    };
+    (s * 255.0).round() as u8
+}
+
+/// A light shown as a monitor frame of `w` x `h`: each cell a flat block.
+fn light_frame(light: &Light, w: usize, h: usize) -> RgbImage {
+    let n = LIGHT_ROWS * LIGHT_COLS;
+    let mut img = RgbImage::new(w, h);
+    for y in 0..h {
+        for x in 0..w {
+            let cell = (y * LIGHT_ROWS / h) * LIGHT_COLS + x * LIGHT_COLS / w;
+            for c in 0..3 {
+                img.data[3 * (y * w + x) + c] = srgb_byte(light.0[c * n + cell]);
+            }
+        }
+    }
+    img
+}
+
+/// The face relit to the target the `setup` sets, after a few frames of the same
+/// picture (so the temporal filters have settled).
+fn relight_still(img: &RgbImage, setup: impl FnOnce(&gst::Element)) -> RgbImage {
+    let e = element();
+    e.set_property("target-transition", 0u64);
+    setup(&e);
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    let c = rgb_caps(img.width as u32, img.height as u32, 30);
+    h.set_src_caps(c.clone());
+    let mut out = None;
+    for i in 0..4 {
+        h.push(buffer(img, &c, frame_time(i), FRAME)).unwrap();
+        out = Some(to_rgb(&h.pull().unwrap(), &c));
+    }
+    out.unwrap()
+}
+
+fn to_image(img: &RgbImage) -> image::RgbImage {
+    image::RgbImage::from_raw(img.width as u32, img.height as u32, img.data.clone()).unwrap()
+}
+
+/// `img` scaled to `w` x `h` with area averaging.
+fn fit(img: &image::RgbImage, w: u32, h: u32) -> image::RgbImage {
+    image::imageops::resize(img, w, h, image::imageops::FilterType::Triangle)
+}
+
+/// The simulator's person and a real portrait under every preset, each column
+/// headed by the preset's monitor picture.
+fn sheet(out: &Path) -> Result<(), String> {
+    let person = render_person(&State::default(), Vec3::new(0.8, 0.8, 0.8), 320, 240);
+    let portrait_path = checkout().join("target/real-media/astronaut.png");
+    let portrait = image::open(&portrait_path)
+        .map_err(|e| {
+            format!(
+                "{}: {e} (scripts/test.sh fetches it)",
+                portrait_path.display()
+            )
+        })?
+        .to_rgb8();
+    let portrait = RgbImage {
+        width: portrait.width() as usize,
+        height: portrait.height() as usize,
+        data: portrait.into_raw(),
+    };
+    let (cw, header) = (200u32, 100u32);
+    let rows: [(&RgbImage, u32); 2] = [(&person, 150), (&portrait, 200)];
+    let height = header + rows.iter().map(|r| r.1).sum::<u32>();
+    let columns = 1 + Preset::ALL.len() as u32;
+    let mut sheet = image::RgbImage::from_pixel(cw * columns, height, image::Rgb([24, 24, 24]));
+    for (col, preset) in std::iter::once(None)
+        .chain(Preset::ALL.map(Some))
+        .enumerate()
+    {
+        let x = col as u32 * cw;
+        if let Some(p) = preset {
+            let monitor = to_image(&light_frame(&p.light(), 192, 96));
+            image::imageops::overlay(&mut sheet, &monitor, (x + 4) as i64, 2);
+        }
+        let mut y = header;
+        for (img, rh) in rows {
+            let shown = match preset {
+                None => img.clone(),
+                Some(p) => relight_still(img, |e| e.set_property("target-preset", p)),
+            };
+            let scaled = fit(&to_image(&shown), cw - 4, rh - 4);
+            image::imageops::overlay(&mut sheet, &scaled, (x + 2) as i64, (y + 2) as i64);
+            y += rh;
+        }
+        eprintln!("{}", preset.map_or("input", |p| p.nick()));
+    }
+    std::fs::create_dir_all(out.parent().unwrap()).map_err(|e| e.to_string())?;
+    sheet.save(out).map_err(|e| e.to_string())
+}
+
+/// The panorama with the monitor's window at three yaws, and the three lights.
+fn projection(out: &Path) -> Result<(), String> {
+    let pano = outdoor_panorama(720);
+    let (w, h) = (720u32, 360u32);
+    let tone = |v: f32| srgb_byte(v);
+    let mut fig = image::RgbImage::from_pixel(w, h + 150, image::Rgb([24, 24, 24]));
+    for y in 0..h {
+        for x in 0..w {
+            fig.put_pixel(
+                x,
+                y,
+                image::Rgb(pano.pixel(x as usize, y as usize).map(tone)),
+            );
+        }
+    }
+    let views = [
+        (-90.0, [255u8, 80, 80]),
+        (0.0, [255, 255, 80]),
+        (90.0, [80, 160, 255]),
+    ];
+    for (k, (yaw, colour)) in views.iter().enumerate() {
+        let view = View {
+            yaw: *yaw,
+            ..View::default()
+        };
+        // The window: longitudes yaw +- fov/2, latitudes +- fov/4 (pitch 0).
+        let x0 = ((yaw - view.fov / 2.0) / 360.0 + 0.5) * w as f64;
+        let x1 = ((yaw + view.fov / 2.0) / 360.0 + 0.5) * w as f64;
+        let y0 = (0.5 - view.fov / 4.0 / 180.0) * h as f64;
+        let y1 = (0.5 + view.fov / 4.0 / 180.0) * h as f64;
+        let inset = 2 * k as i64;
+        let wrap = |x: i64| x.rem_euclid(w as i64) as u32;
+        for x in (x0 as i64 + inset)..(x1 as i64 - inset) {
+            for y in [y0 as i64 + inset, y1 as i64 - inset - 1] {
+                fig.put_pixel(wrap(x), y as u32, image::Rgb(*colour));
+            }
+        }
+        for y in (y0 as i64 + inset)..(y1 as i64 - inset) {
+            for x in [x0 as i64 + inset, x1 as i64 - inset - 1] {
+                fig.put_pixel(wrap(x), y as u32, image::Rgb(*colour));
+            }
+        }
+        let light = to_image(&light_frame(&pano.light(&view), 32 * 7, 16 * 7));
+        let lx = 12 + k as u32 * 236;
+        for y in (h + 16)..(h + 16 + 116) {
+            for x in lx..(lx + 228) {
+                fig.put_pixel(x, y, image::Rgb(*colour));
+            }
+        }
+        image::imageops::overlay(&mut fig, &light, (lx + 2) as i64, (h + 18) as i64);
+    }
+    std::fs::create_dir_all(out.parent().unwrap()).map_err(|e| e.to_string())?;
+    fig.save(out).map_err(|e| e.to_string())
+}
+
+/// A target measured: its name, the light the truth is rendered under, and the
+/// element properties that select it.
+struct Measured {
+    name: String,
+    light: Light,
+    properties: Vec<(String, String)>,
+}
+
+fn measured_targets(map: &Path) -> Vec<Measured> {
+    let mut targets: Vec<_> = Preset::ALL
+        .iter()
+        .map(|p| Measured {
+            name: format!("preset-{}", p.nick()),
+            light: p.light(),
+            properties: vec![("target-preset".to_string(), p.nick().to_string())],
+        })
+        .collect();
+    let pano = Panorama::open(map).expect("the map just written");
+    for yaw in [-90.0, 0.0, 90.0, 180.0] {
+        targets.push(Measured {
+            name: format!("outdoor-yaw{yaw}"),
+            light: pano.light(&View {
+                yaw,
+                ..View::default()
+            }),
+            properties: vec![
+                (
+                    "target-environment".to_string(),
+                    map.to_string_lossy().into_owned(),
+                ),
+                ("target-yaw".to_string(), format!("{yaw}")),
+            ],
+        });
+    }
+    targets
+}
+
+/// Relights the simulator's `call` recording to every preset and to the outdoor
+/// map at four yaws, and scores each against the exact render under that light.
+fn measure() -> Result<(), String> {
+    let frames: usize =
+        flag("--frames").map_or(Ok(60), |f| f.parse().map_err(|_| "bad --frames"))?;
+    let model = flag("--model")
+        .map(PathBuf::from)
+        .unwrap_or_else(default_model);
+    let dir = checkout().join(format!("target/tmp/targets-call-{frames}"));
+    let map = dir.join("outdoor.exr");
+    write_exr(512, &map)?;
+    let targets = measured_targets(&map);
+    if !dir.join("meta.json").exists() {
+        let mut spec = RecordingSpec::standard("call").ok_or("no call recording")?;
+        spec.frames = frames;
+        let mut rec = Recording::new(spec)?;
+        for t in &targets {
+            // The monitor shows the light itself: each grid cell a flat block.
+            let frame = light_frame(&t.light, FRAME_WIDTH, FRAME_HEIGHT);
+            let cells = light_of(rec.renderer(), &frame);
+            rec.targets.push((t.name.clone(), frame, cells));
+        }
+        eprintln!(
+            "rendering {} frames under {} lights into {}",
+            frames,
+            rec.targets.len(),
+            dir.display()
+        );
+        rec.write(&dir).map_err(|e| e.to_string())?;
+    }
+    println!("| target | face-region RMSE | input's RMSE | ms/frame (under load) |");
+    println!("|---|---|---|---|");
+    let model_str = model.to_string_lossy().into_owned();
+    let shipped = ["studio", "sunset", "left-key"].map(|n| (n.to_string(), Vec::new()));
+    let all = shipped
+        .into_iter()
+        .chain(targets.into_iter().map(|t| (t.name, t.properties)));
+    for (name, props) in all {
+        let mut p: Vec<(&str, &str)> = vec![("model-location", &model_str)];
+        p.extend(props.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+        let s = score_recording(&dir, &name, true, &p, false)?;
+        println!(
+            "| {name} | {:.2} | {:.2} | {:.0} |",
+            s.rmse_region, s.input_rmse_region, s.ms_per_frame
+        );
+    }
+    Ok(())
+}
+
+/// What target changes and video targets cost.
+fn timing() -> Result<(), String> {
+    lsydrelight_testkit::init();
+    let reps = 20;
+    let started = Instant::now();
+    for _ in 0..reps {
+        for p in Preset::ALL {
+            std::hint::black_box(p.light());
+        }
+    }
+    let preset_ms = started.elapsed().as_secs_f64() * 1e3 / (reps * Preset::ALL.len()) as f64;
+    let map = checkout().join("target/tmp/targets-timing/outdoor-2048.exr");
+    write_exr(2048, &map)?;
+    let started = Instant::now();
+    let pano = Panorama::open(&map)?;
+    let open_ms = started.elapsed().as_secs_f64() * 1e3;
+    let time_view = |view: View| {
+        let started = Instant::now();
+        for _ in 0..5 {
+            std::hint::black_box(pano.light(&view));
+        }
+        started.elapsed().as_secs_f64() * 1e3 / 5.0
+    };
+    let level_ms = time_view(View {
+        yaw: 30.0,
+        ..View::default()
+    });
+    let pitched_ms = time_view(View {
+        yaw: 30.0,
+        pitch: 10.0,
+        ..View::default()
+    });
+    println!("| step | ms (under load) |");
+    println!("|---|---|");
+    println!("| a preset's light | {preset_ms:.3} |");
+    println!("| reading a 2048 x 1024 EXR map | {open_ms:.0} |");
+    println!("| projecting it, no pitch (a yaw change) | {level_ms:.1} |");
+    println!("| projecting it, with pitch | {pitched_ms:.1} |");
+
+    // In the element: a fade (one encode a frame) and a video target (one light and
+    // one encode per new frame of it), against the same frames with a still target.
+    let person = render_person(&State::default(), Vec3::new(0.8, 0.8, 0.8), 320, 240);
+    let c = rgb_caps(320, 240, 30);
+    let frames = 60u64;
+    let run = |fade: bool, video: bool| -> (f64, f64, u64, f64, u64) {
+        let e = element();
+        e.set_property("reuse-interval", 1u32);
+        let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+        h.set_src_caps(c.clone());
+        // The target video comes from its own thread: each face frame waits for the
+        // target frame after its time, as with any aligned stream.
+        let pusher = video.then(|| {
+            let mut th = Harness::with_element(&e, Some("target_sink"), None);
+            let tc = rgb_caps(256, 144, 30);
+            th.set_src_caps(tc.clone());
+            std::thread::spawn(move || {
+                for i in 0..frames {
+                    let level = (i % 10) as f32 / 10.0;
+                    let light = Light::uniform([level, 0.5, 1.0 - level]);
+                    let frame = light_frame(&light, 256, 144);
+                    if th.push(buffer(&frame, &tc, frame_time(i), FRAME)).is_err() {
+                        break;
+                    }
+                }
+                th.push_event(gst::event::Eos::new());
+                th
+            })
+        });
+        for i in 0..frames {
+            if fade && i % 15 == 0 {
+                e.set_property("target-preset", Preset::ALL[(i / 15) as usize % 9]);
+            }
+            h.push(buffer(&person, &c, frame_time(i), FRAME)).unwrap();
+            h.pull().unwrap();
+        }
+        if let Some(p) = pusher {
+            p.join().unwrap();
+        }
+        let st = e.property::<gst::Structure>("stats");
+        let f = |k: &str| st.get::<f64>(k).unwrap();
+        (
+            f("processing-seconds") * 1e3 / frames as f64,
+            f("target-seconds") * 1e3,
+            stat(&e, "target-encodes"),
+            f("target-stream-light-seconds") * 1e3,
+            stat(&e, "target-stream-decoded"),
+        )
+    };
+    let (still, ..) = run(false, false);
+    let (faded, fade_ms, fade_encodes, ..) = run(true, false);
+    let (video, video_enc_ms, video_encodes, light_ms, decoded) = run(false, true);
+    println!("| element, still target: per frame | {still:.1} |");
+    println!("| element, a new preset every 0.5 s (always fading): per frame | {faded:.1} |");
+    println!(
+        "| encoding a faded light | {:.2} ({fade_encodes} encodes) |",
+        fade_ms / fade_encodes.max(1) as f64
+    );
+    println!("| element, a 30 fps video target: per frame | {video:.1} |");
+    println!(
+        "| a video target frame's light (256 x 144) | {:.2} |",
+        light_ms / decoded.max(1) as f64
+    );
+    println!(
+        "| encoding a video target frame's light | {:.2} ({video_encodes} encodes) |",
+        video_enc_ms / video_encodes.max(1) as f64
+    );
+    Ok(())
+}
