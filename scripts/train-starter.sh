@@ -32,7 +32,17 @@ for person in $unseen_people; do
   [ -f "$data/unseen/person-$person/clean.npy" ] || "$stage" heldout --subject "$person" --out "$data/unseen/person-$person"
 done
 
-resume=()
-[ -f "$run/checkpoint.pt" ] && resume=(--resume)
-(cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$run" --steps "$steps" \
-  --resolution 96 --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
+if [ ! -f "$run/done" ]; then
+  resume=()
+  [ -f "$run/checkpoint.pt" ] && resume=(--resume)
+  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$run" --steps "$steps" \
+    --resolution 96 --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
+  touch "$run/done"
+fi
+
+# Export: the contract's stages (checked against PyTorch on a stranger's held-out frames),
+# the saved network personal models fine-tune from, and the test on strangers.
+[ -e "$data/heldout" ] || ln -s unseen/person-200 "$data/heldout"
+(cd train && ../.venv/bin/python -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter --name starter)
+(cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out ../models/starter/network.pt)
+(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data")
