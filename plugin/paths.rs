@@ -2,7 +2,7 @@
 //! shipped model and target lights.
 //!
 //! An installed plugin looks in a folder `lsydrelight/` next to its own file
-//! (`<plugin dir>/lsydrelight/libonnxruntime.so`, `.../models/default`,
+//! (`<plugin dir>/lsydrelight/libonnxruntime.so`, `.../models/starter`,
 //! `.../targets`); a plugin built in a checkout looks in the checkout that holds
 //! it (`target/onnxruntime/libonnxruntime.so`, made by `scripts/setup.sh`, and
 //! `models/`), found from the plugin's file or, when it is linked into a program
@@ -65,8 +65,10 @@ pub fn default_ort_library() -> PathBuf {
     locate("libonnxruntime.so", "target/onnxruntime/libonnxruntime.so")
 }
 
+/// The starter model, trained on many simulated people: the default until the
+/// user trains their own (`lsydrelight train`).
 pub fn default_model() -> PathBuf {
-    locate("models/default", "models/default")
+    locate("models/starter", "models/starter")
 }
 
 pub fn default_face_detector() -> PathBuf {

@@ -150,6 +150,30 @@ fn unsupported_caps_name_the_problem_and_the_fix() {
 }
 
 #[test]
+fn the_default_model_is_the_starter_model_for_anyone() {
+    init();
+    let e = gst::ElementFactory::make("lsydrelight").build().unwrap();
+    let model: String = e.property("model-location");
+    assert!(
+        model.ends_with("models/starter"),
+        "until the user trains their own, the element relights with the starter model: {model}"
+    );
+    // It loads and relights the tests' person, whom it never saw, with no monitor stream.
+    let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+    let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+    h.set_src_caps(c.clone());
+    h.push(buffer(face_rgb(), &c, frame_time(0), FRAME))
+        .unwrap();
+    let out = h.pull().unwrap();
+    let relit = to_rgb(&out, &c);
+    assert!(
+        mean_abs_diff(&relit, &face_rgb()) > 1.0,
+        "the starter model relights the face"
+    );
+    assert_eq!(stat(&e, "passed-through"), 0);
+}
+
+#[test]
 fn relights_without_a_monitor_stream() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
     // The same frame three times would be a static scene; run the network every time.

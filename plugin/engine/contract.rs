@@ -108,7 +108,7 @@ impl fmt::Display for ContractError {
         match self {
             ContractError::Missing(p) => write!(
                 f,
-                "model file {} does not exist; set model-location to a model folder (the shipped one is models/default)",
+                "model file {} does not exist; set model-location to a model folder (the shipped ones are models/starter, for anyone, and models/default, for the simulator's person)",
                 p.display()
             ),
             ContractError::Unreadable(p, e) => write!(

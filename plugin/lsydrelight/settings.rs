@@ -253,7 +253,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
         vec![
             glib::ParamSpecString::builder("model-location")
                 .nick("Model")
-                .blurb("Folder of the personalised model (model.json and its ONNX stages); the shipped default is models/default")
+                .blurb("Folder of the personalised model (model.json and its ONNX stages); the default, models/starter, is trained on many people; `lsydrelight train` makes your own")
                 .default_value(Some(path(&d.model_location).as_str()))
                 .mutable_ready()
                 .build(),

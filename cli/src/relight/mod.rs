@@ -96,7 +96,7 @@ pub struct Args {
     #[arg(long, value_name = "STOPS", allow_negative_numbers = true)]
     exposure: Option<f64>,
 
-    /// The personalised model's folder [default: models/default]
+    /// The model's folder [default: models/starter, trained on many people]
     #[arg(long, value_name = "DIR")]
     model: Option<PathBuf>,
 
@@ -292,7 +292,7 @@ fn check_model(model: Option<&Path>) -> Result<(), Failure> {
     Err(Failure::new(match model {
         Some(_) => format!(
             "--model {}: no model.json there; pass a model folder (model.json and its ONNX \
-             stages, as lsyd.export writes them; the shipped one is models/default)",
+             stages, as lsyd.export writes them; the shipped ones are models/starter and models/default)",
             dir.display()
         ),
         None => format!(

@@ -5,10 +5,16 @@ use gst::prelude::*;
 
 use crate::init;
 
-/// A new `lsydrelight` element with its default properties.
+/// A new `lsydrelight` element with its default properties, but for the model:
+/// the simulator's default person, whom the tests render, relit with their own
+/// model (`models/default`) rather than the starter model for anyone.
 pub fn element() -> gst::Element {
     init();
     gst::ElementFactory::make("lsydrelight")
+        .property(
+            "model-location",
+            crate::default_model().to_str().expect("UTF-8 path"),
+        )
         .build()
         .expect("lsydrelight element")
 }

@@ -44,7 +44,8 @@ pub fn checkout() -> PathBuf {
         .to_path_buf()
 }
 
-/// The shipped model, `models/default`.
+/// The simulator's default person's own model, `models/default` (the element's
+/// default is the starter model, for anyone): the model the tests' person is relit with.
 pub fn default_model() -> PathBuf {
     checkout().join("models/default")
 }
