@@ -167,7 +167,7 @@ fn the_default_model_is_the_starter_model_for_anyone() {
     let out = h.pull().unwrap();
     let relit = to_rgb(&out, &c);
     assert!(
-        mean_abs_diff(&relit, &face_rgb()) > 1.0,
+        mean_abs_diff(&relit, face_rgb()) > 1.0,
         "the starter model relights the face"
     );
     assert_eq!(stat(&e, "passed-through"), 0);
