@@ -158,8 +158,8 @@ fn launch(description: &str) -> Result<gst::Pipeline, String> {
 
 /// Relights `<dir>/face.y4m` (with `<dir>/monitor.y4m` unless `with_monitor` is false)
 /// to the target `<dir>/target-<target>.png` and scores it against `<dir>/truth-<target>.y4m`.
-/// `properties` are set on the element from strings, as gst-launch does; `with_flow`
-/// adds the flow-based tOF.
+/// The element relights with the person's own model (`models/default`); `properties`
+/// are set on it from strings, as gst-launch does; `with_flow` adds the flow-based tOF.
 pub fn score_recording(
     dir: &Path,
     target: &str,
@@ -186,6 +186,12 @@ pub fn score_recording(
     r.set_property(
         "target-location",
         dir.join(format!("target-{target}.png")).to_str().unwrap(),
+    );
+    // The recordings are of the simulator's default person: relight them with
+    // their own model unless `properties` say otherwise.
+    r.set_property(
+        "model-location",
+        crate::default_model().to_str().expect("UTF-8 path"),
     );
     for (k, v) in properties {
         r.set_property_from_str(k, v);
