@@ -5,20 +5,21 @@
 //!
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
-//!     [--frames 90] [--target models/targets/sunset.png]
+//!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter]
 //! ```
 //!
 //! The media come from packages, fetched by `scripts/setup.sh full` into
 //! `target/real-media` (never committed): scikit-image's `astronaut.png` (PyPI,
 //! public domain), shown as a still video, and Debian opencv-doc's `Megamind.avi`
-//! (a film clip, for robustness only).
+//! (a film clip, for robustness only). The model is the element's default, the
+//! starter model for anyone, unless `--model` names another.
 
 use std::path::{Path, PathBuf};
 
 use deskstage::monitor::RgbImage;
 use gst::prelude::*;
 use lsydrelight_testkit::{
-    checkout, default_model,
+    checkout,
     flags::flag,
     init,
     quality::{Region, box_edge_score, mean_level, mottling, pumping},
@@ -84,13 +85,17 @@ fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
 
 /// The frames relit by the element with no monitor stream, each with the square
 /// the element relit (its `face` region-of-interest meta; None when it relit none).
-fn relight(frames: &[RgbImage], target: &Path) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+fn relight(
+    frames: &[RgbImage],
+    model: &Path,
+    target: &Path,
+) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
     let (w, h) = (frames[0].width as u32, frames[0].height as u32);
     let caps = rgb_caps(w, h, 30);
     let pipeline = gst::parse::launch(&format!(
         "appsrc name=src format=time ! lsydrelight name=r model-location=\"{}\" \
          target-location=\"{}\" ! appsink name=sink sync=false",
-        default_model().display(),
+        model.display(),
         target.display()
     ))
     .map_err(|e| e.to_string())?
@@ -171,12 +176,13 @@ fn measure(
     name: &str,
     path: &Path,
     frames: usize,
+    model: &Path,
     target: &Path,
     out: &Path,
 ) -> Result<Measured, String> {
     let input = decode(path, frames)?;
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
-        relight(&input, target)?.into_iter().unzip();
+        relight(&input, model, target)?.into_iter().unzip();
     // The face measures look at the square the element relit.
     let regions: Vec<Region> = regions
         .into_iter()
@@ -220,6 +226,7 @@ fn main() -> Result<(), String> {
     let out = flag("--out").map_or_else(|| root.join("results/real"), PathBuf::from);
     let target =
         flag("--target").map_or_else(|| root.join("models/targets/sunset.png"), PathBuf::from);
+    let model = flag("--model").map_or_else(gstlsydrelight::paths::default_model, PathBuf::from);
     let frames: usize =
         flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
     init();
@@ -237,7 +244,7 @@ fn main() -> Result<(), String> {
                 path.display()
             ));
         }
-        let m = measure(name, &path, frames, &target, &out)?;
+        let m = measure(name, &path, frames, &model, &target, &out)?;
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
