@@ -361,7 +361,7 @@ fn timing() -> Result<(), String> {
         pitch: 10.0,
         ..View::default()
     });
-    println!("| step | ms (under load) |");
+    println!("| step | ms |");
     println!("|---|---|");
     println!("| a preset's light | {preset_ms:.3} |");
     println!("| reading a 2048 x 1024 EXR map | {open_ms:.0} |");
