@@ -20,7 +20,7 @@ use deskstage::monitor::RgbImage;
 use deskstage::subject::State;
 use gst::prelude::*;
 use gst_check::Harness;
-use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, Light};
+use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, Light, linear_to_srgb_byte};
 use gstlsydrelight::targets::{Panorama, Preset, View};
 use lsydrelight_testkit::{
     checkout, default_model,
@@ -88,17 +88,6 @@ fn write_exr(pano_width: usize, path: &Path) -> Result<(), String> {
         .map_err(|e| e.to_string())
 }
 
-/// Linear light in [0, 1] as an 8-bit sRGB value.
-fn srgb_byte(v: f32) -> u8 {
-    let v = v.clamp(0.0, 1.0);
-    let s = if v <= 0.003_130_8 {
-        v * 12.92
-    } else {
-        1.055 * v.powf(1.0 / 2.4) - 0.055
-    };
-    (s * 255.0).round() as u8
-}
-
 /// A light shown as a monitor frame of `w` x `h`: each cell a flat block.
 fn light_frame(light: &Light, w: usize, h: usize) -> RgbImage {
     let n = LIGHT_ROWS * LIGHT_COLS;
@@ -107,7 +96,7 @@ fn light_frame(light: &Light, w: usize, h: usize) -> RgbImage {
         for x in 0..w {
             let cell = (y * LIGHT_ROWS / h) * LIGHT_COLS + x * LIGHT_COLS / w;
             for c in 0..3 {
-                img.data[3 * (y * w + x) + c] = srgb_byte(light.0[c * n + cell]);
+                img.data[3 * (y * w + x) + c] = linear_to_srgb_byte(light.0[c * n + cell]);
             }
         }
     }
@@ -192,7 +181,7 @@ fn sheet(out: &Path) -> Result<(), String> {
 fn projection(out: &Path) -> Result<(), String> {
     let pano = outdoor_panorama(720);
     let (w, h) = (720u32, 360u32);
-    let tone = |v: f32| srgb_byte(v);
+    let tone = linear_to_srgb_byte;
     let mut fig = image::RgbImage::from_pixel(w, h + 150, image::Rgb([24, 24, 24]));
     for y in 0..h {
         for x in 0..w {

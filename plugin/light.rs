@@ -30,7 +30,7 @@ fn srgb_to_linear(v: f32) -> f32 {
 }
 
 /// The sRGB transfer function: linear light in [0, 1] to an 8-bit value.
-fn linear_to_srgb_byte(v: f32) -> u8 {
+pub fn linear_to_srgb_byte(v: f32) -> u8 {
     let v = v.clamp(0.0, 1.0);
     let s = if v <= 0.003_130_8 {
         v * 12.92
