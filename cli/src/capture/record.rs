@@ -9,6 +9,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use deskstage::io::GrowingNpyWriter;
 use gst::prelude::*;
 use gstlsydrelight::face::FaceDetector;
+use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, Light};
 use gstlsydrelight::lsydrelight::frame_view;
 
@@ -121,9 +122,17 @@ fn fail(shared: &Shared, failure: Failure) -> gst::FlowError {
     gst::FlowError::Error
 }
 
-/// Feeds `light-sink`'s frames to the recorder.
-pub fn attach_light(pipeline: &gst::Pipeline, shared: &Shared) {
-    let sink = app_sink(pipeline, "light-sink");
+/// Calls `handle` with each frame of the app sink `name` and its running time in
+/// seconds; `source` names the branch ("screen", "camera") in the error for a
+/// frame that cannot be read.
+fn on_frames(
+    pipeline: &gst::Pipeline,
+    name: &str,
+    source: &'static str,
+    shared: &Shared,
+    mut handle: impl FnMut(f64, Frame<'_>) -> Result<(), gst::FlowError> + Send + 'static,
+) {
+    let sink = app_sink(pipeline, name);
     let shared = shared.clone();
     sink.set_callbacks(
         gst_app::AppSinkCallbacks::builder()
@@ -132,71 +141,58 @@ pub fn attach_light(pipeline: &gst::Pipeline, shared: &Shared) {
                 let Some((t, frame)) = frame_of(&sample) else {
                     return Err(fail(
                         &shared,
-                        Failure::new(
-                            "a screen frame without a timestamp or readable caps; the screen \
-                         source must timestamp its frames (live sources do)",
-                        ),
+                        Failure::new(format!(
+                            "a {source} frame without a timestamp or readable caps; the {source} \
+                             source must timestamp its frames (live sources do)"
+                        )),
                     ));
                 };
-                let light = frame_view(&frame).map(|view| Light::from_frame(&view));
-                let Some(light) = light else {
-                    return Err(gst::FlowError::NotNegotiated);
-                };
-                lock(&shared)
-                    .screen_frame(t, &light)
-                    .map_err(|f| fail(&shared, f))?;
+                let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
+                handle(t, view)?;
                 Ok(gst::FlowSuccess::Ok)
             })
             .build(),
     );
 }
 
+/// Feeds `light-sink`'s frames to the recorder.
+pub fn attach_light(pipeline: &gst::Pipeline, shared: &Shared) {
+    let recorder = shared.clone();
+    on_frames(pipeline, "light-sink", "screen", shared, move |t, view| {
+        lock(&recorder)
+            .screen_frame(t, &Light::from_frame(&view))
+            .map_err(|f| fail(&recorder, f))
+    });
+}
+
 /// Feeds `face-sink`'s frames, with the face `detector` finds, to the recorder.
 pub fn attach_face(pipeline: &gst::Pipeline, shared: &Shared, mut detector: FaceDetector) {
-    let sink = app_sink(pipeline, "face-sink");
-    let shared = shared.clone();
-    sink.set_callbacks(
-        gst_app::AppSinkCallbacks::builder()
-            .new_sample(move |sink| {
-                let sample = sink.pull_sample().map_err(|_| gst::FlowError::Eos)?;
-                let Some((t, frame)) = frame_of(&sample) else {
-                    return Err(fail(
-                        &shared,
-                        Failure::new(
-                            "a camera frame without a timestamp or readable caps; the camera \
-                         source must timestamp its frames (live sources do)",
-                        ),
-                    ));
-                };
-                let Some(view) = frame_view(&frame) else {
-                    return Err(gst::FlowError::NotNegotiated);
-                };
-                let faces = detector.detect(&view).map_err(|e| {
-                    fail(
-                        &shared,
-                        Failure::new(format!("the face detector failed: {e}")),
-                    )
-                })?;
-                let face = faces.first().map(|f| Face {
-                    width: f.width,
-                    height: f.height,
-                    eyes: [f.keypoints[0], f.keypoints[1]],
-                    nose: f.keypoints[2],
-                    mouth: f.keypoints[3],
-                    luminance: guidance::face_luminance(
-                        view.planes[0].data,
-                        view.planes[0].stride,
-                        view.width,
-                        view.height,
-                        [f.cx, f.cy],
-                        [f.width, f.height],
-                    ),
-                });
-                lock(&shared).camera_frame(t, face);
-                Ok(gst::FlowSuccess::Ok)
-            })
-            .build(),
-    );
+    let recorder = shared.clone();
+    on_frames(pipeline, "face-sink", "camera", shared, move |t, view| {
+        let faces = detector.detect(&view).map_err(|e| {
+            fail(
+                &recorder,
+                Failure::new(format!("the face detector failed: {e}")),
+            )
+        })?;
+        let face = faces.first().map(|f| Face {
+            width: f.width,
+            height: f.height,
+            eyes: [f.keypoints[0], f.keypoints[1]],
+            nose: f.keypoints[2],
+            mouth: f.keypoints[3],
+            luminance: guidance::face_luminance(
+                view.planes[0].data,
+                view.planes[0].stride,
+                view.width,
+                view.height,
+                [f.cx, f.cy],
+                [f.width, f.height],
+            ),
+        });
+        lock(&recorder).camera_frame(t, face);
+        Ok(())
+    });
 }
 
 fn app_sink(pipeline: &gst::Pipeline, name: &str) -> gst_app::AppSink {
