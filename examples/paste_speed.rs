@@ -91,7 +91,7 @@ fn main() {
                 .collect();
             cases.push(Case {
                 name: format!("{label} {format:?}"),
-                change: LightingChange::new(&input, &relit, RES, format, MATRIX),
+                change: LightingChange::new(&input, &relit, RES),
                 buffers,
                 crop,
                 feather: (FEATHER * crop.size as f64).round() as usize,

@@ -1,7 +1,7 @@
 //! Real faces the model never saw, with no monitor stream (the source light is
 //! predicted): the element's output scored with measures that need no ground
 //! truth (box edges, mottling, pumping; `lsydrelight_testkit::quality`), and a
-//! before/after image of each.
+//! before/after image of each with a map of the change it made.
 //!
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
@@ -22,7 +22,7 @@ use lsydrelight_testkit::{
     checkout,
     flags::flag,
     init,
-    quality::{Region, box_edge_score, mean_level, mottling, pumping},
+    quality::{BoxEdge, Region, box_edge, change_map, mean_level, mottling, pumping},
     video::{FRAME, frame_time, rgb_caps, to_rgb},
 };
 
@@ -34,6 +34,8 @@ struct Measured {
     box_edge_median: f64,
     mottling_median: f64,
     pumping: f64,
+    /// Where the largest box edge is.
+    worst: String,
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -189,11 +191,25 @@ fn measure(
         .zip(&input)
         .map(|(r, img)| r.unwrap_or_else(|| centred_square(img)))
         .collect();
-    let edges: Vec<f64> = input
+    let edges: Vec<BoxEdge> = input
         .iter()
         .zip(&output)
-        .map(|(i, o)| box_edge_score(i, o))
+        .map(|(i, o)| box_edge(i, o))
         .collect();
+    let (worst_frame, worst) = edges
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.score.total_cmp(&b.1.score))
+        .expect("at least one frame");
+    let worst = format!(
+        "frame {worst_frame}: {:.1}% across {} = {}, {} from {}",
+        worst.score,
+        if worst.vertical { "x" } else { "y" },
+        worst.across,
+        if worst.vertical { "y" } else { "x" },
+        worst.along
+    );
+    let edges: Vec<f64> = edges.iter().map(|e| e.score).collect();
     let mottled: Vec<f64> = input
         .iter()
         .zip(&output)
@@ -210,7 +226,11 @@ fn measure(
     let image = out.join(format!("{name}-before-after.png"));
     deskstage::io::write_png(&image, &before_after(&input[shown], &output[shown]))
         .map_err(|e| format!("{}: {e}", image.display()))?;
+    let image = out.join(format!("{name}-change.png"));
+    deskstage::io::write_png(&image, &change_map(&input[shown], &output[shown]))
+        .map_err(|e| format!("{}: {e}", image.display()))?;
     Ok(Measured {
+        worst,
         name: name.to_string(),
         frames: input.len(),
         box_edge_max: edges.iter().copied().fold(0.0, f64::max),
@@ -232,6 +252,7 @@ fn main() -> Result<(), String> {
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
+    let mut worst = Vec::new();
     println!(
         "| clip | frames | box edge max % | box edge median % | mottling median % | pumping (levels) |"
     );
@@ -249,7 +270,14 @@ fn main() -> Result<(), String> {
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
         );
+        worst.push(format!("{}: largest box edge at {}", m.name, m.worst));
     }
-    println!("before/after images in {}", out.display());
+    for line in worst {
+        println!("{line}");
+    }
+    println!(
+        "before/after images and maps of the change (log luma ratio, grey for none) in {}",
+        out.display()
+    );
     Ok(())
 }

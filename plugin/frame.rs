@@ -2,16 +2,14 @@
 //! the face crop, and putting a lighting change back into a frame.
 //!
 //! The network sees a square crop resampled to its resolution. Its output goes
-//! back as a lighting change, not as an upscaled image: with `R` the relit
-//! crop and `I` the network's input (both at network resolution) and `↑` a
-//! bilinear upsampling to the frame,
-//!
-//! `out = R↑ + g↑ · (in − I↑)`,   `g = (lum(R) + ε) / (lum(I) + ε)`
-//!
-//! so the frame keeps its own detail, scaled by the local change in
-//! brightness, and takes its low frequencies from the network. YUV is an
-//! affine function of RGB, so the same equation runs on Y, U and V planes
-//! directly and a YUV frame is never converted as a whole.
+//! back as a lighting change, not as an upscaled image: per RGB channel a
+//! smooth gain `g = (R + ε) / (I + ε)` of the network's relit image `R` over its
+//! input `I`, and the frame becomes `(v' + ε) = g↑ · (v + ε)`, `↑` a bilinear
+//! upsampling to the frame. The frame keeps its own detail and takes its
+//! lighting from the network. The gain extends beyond the crop and fades out
+//! round the face ([`gain_field`]), so the change has no edge. YUV is an affine
+//! function of RGB, so the change runs on Y, U and V planes directly, as a gain
+//! and an offset per plane, and a YUV frame is never converted as a whole.
 
 /// Pixel layouts the element handles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -505,185 +503,69 @@ pub fn mean_luma(img: &[f32]) -> f32 {
     (0..n).map(|i| luma(img, n, i)).sum::<f32>() / n as f32
 }
 
-/// The lighting change at network resolution, ready to be applied to a frame:
-/// per output channel (R, G, B or Y, Cb, Cr in 8-bit units) a pixel `v` becomes
-/// `R + g · (v − I)`, with R the relit image, I the network's input and g the gain
-/// of the frame's detail.
+/// The lighting change at network resolution: per RGB channel the log of a
+/// smooth gain of the frame, `(v' + ε) = g · (v + ε)`, taken from the network's
+/// output over its input. Applied as a [`GainField`] that carries it beyond the
+/// crop and fades it out round the face, so the change has no edge anywhere in
+/// the frame.
 pub struct LightingChange {
     res: usize,
-    base: [Vec<f32>; 3],
-    input: [Vec<f32>; 3],
-    /// In RGB, each channel's own gain, so the change is a pure per-channel gain
-    /// of the frame (`R = g · I`): no halo at edges sharper than the network sees.
-    /// In YUV, the luma gain for all three.
-    gain: [Vec<f32>; 3],
+    /// Per channel (R, G, B), the log of the gain, smoothed, res × res.
+    log_gain: [Vec<f32>; 3],
+    /// The network's input (sRGB in [0, 1]), lightly smoothed: what the gain
+    /// multiplies, to express a change of colour in Cb and Cr.
+    smooth_input: [Vec<f32>; 3],
 }
 
 impl LightingChange {
-    /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res),
-    /// expressed in the channels of `format`.
-    pub fn new(
-        input: &[f32],
-        relit: &[f32],
-        res: usize,
-        format: PixelFormat,
-        matrix: YuvMatrix,
-    ) -> LightingChange {
+    /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res).
+    pub fn new(input: &[f32], relit: &[f32], res: usize) -> LightingChange {
         let n = res * res;
-        let relit = smooth_gain_relit(input, &bound_invented_light(input, relit, n), res);
-        let ratio = |r: f32, i: f32| ((r + GAIN_EPSILON) / (i + GAIN_EPSILON)).clamp(0.0, MAX_GAIN);
-        let gain = if format.is_yuv() {
-            let luma_gain: Vec<f32> = (0..n)
-                .map(|i| ratio(luma(&relit, n, i), luma(input, n, i)))
-                .collect();
-            [luma_gain.clone(), luma_gain.clone(), luma_gain]
-        } else {
-            [0, 1, 2].map(|c| {
-                (c * n..(c + 1) * n)
-                    .map(|i| ratio(relit[i], input[i]))
-                    .collect()
-            })
-        };
-        let to_channels = |img: &[f32]| -> [Vec<f32>; 3] {
-            if format.is_yuv() {
-                let mut ch = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
-                for i in 0..n {
-                    let yuv = matrix.from_rgb([img[i], img[n + i], img[2 * n + i]]);
-                    for c in 0..3 {
-                        ch[c][i] = yuv[c];
-                    }
-                }
-                ch
-            } else {
-                [0, 1, 2].map(|c| img[c * n..(c + 1) * n].iter().map(|v| v * 255.0).collect())
-            }
-        };
+        let relit = bound_invented_light(input, relit, n);
         LightingChange {
             res,
-            base: to_channels(&relit),
-            input: to_channels(input),
-            gain,
+            log_gain: smooth_log_gain(input, &relit, res),
+            smooth_input: [0, 1, 2]
+                .map(|c| blur(&input[c * n..(c + 1) * n], res, SHADING_SMOOTHING)),
         }
     }
 
-    /// Applies the change to the crop of `frame`. Within `feather` pixels of a
-    /// crop edge that lies inside the frame, the change fades out so the crop
-    /// leaves no seam.
+    /// Applies the change round `crop` of `frame`: whole near the face, fading
+    /// out over `feather` pixels (see [`GainField`]).
     pub fn apply(&self, frame: &mut FrameMut, crop: Crop, feather: usize) {
         self.apply_faded(frame, crop, feather, 1.0);
     }
 
     /// [`LightingChange::apply`], shown at `strength` in [0, 1] (a face fading in or out).
     pub fn apply_faded(&self, frame: &mut FrameMut, crop: Crop, feather: usize, strength: f32) {
-        let fade = Fade::new(crop, frame.width, frame.height, feather, strength);
-        for pass in frame.format.passes() {
-            let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
-            let (area, sub) = (crop.in_plane(pass.subsample), pass.subsample);
-            match *pass.lanes {
-                [a] => self.paste([a], data, stride, area, sub, &fade),
-                [a, b] => self.paste([a, b], data, stride, area, sub, &fade),
-                [a, b, c] => self.paste([a, b, c], data, stride, area, sub, &fade),
-                [a, b, c, d] => self.paste([a, b, c, d], data, stride, area, sub, &fade),
-                _ => unreachable!("no format has {} bytes a pixel", pass.lanes.len()),
-            }
-        }
+        let size = (frame.width, frame.height);
+        GainField::new(
+            self,
+            crop,
+            feather,
+            strength,
+            frame.format,
+            frame.matrix,
+            size,
+        )
+        .paste(frame);
     }
 
-    /// Applies the change to the `area` (in the plane's pixels) of one plane
-    /// whose `BPP` bytes a pixel hold the channels `lanes`. Each row of the area
-    /// is one flat run of bytes ("lanes"), whatever channels they hold, so the
-    /// loop over it vectorises.
-    fn paste<const BPP: usize>(
-        &self,
-        lanes: [Option<usize>; BPP],
-        data: &mut [u8],
-        stride: usize,
-        area: Crop,
-        subsample: usize,
-        fade: &Fade,
-    ) {
-        let wx: Vec<f32> = (0..area.size)
-            .map(|i| fade.weight_x((area.x + i) * subsample))
-            .collect();
-        // Columns and rows where the fade is zero keep their bytes, as they
-        // must even where the maps are not finite. The fade rises from each
-        // inner edge, so such columns are at the ends and are left out. Among
-        // the others, the product of two positive weights (each at least
-        // 0.5 / feather) is never zero, so every byte left changes as it did.
-        let positive = |w: &f32| *w > 0.0;
-        let (Some(first), Some(last)) =
-            (wx.iter().position(positive), wx.iter().rposition(positive))
-        else {
-            return;
-        };
-        let columns = first..last + 1;
-        let taps = taps(self.res, area.size);
-        // Per lane; zero on padding, whose maps are zero too, so v + 0 · (0 − v)
-        // leaves those bytes as they are.
-        let lane_wx: Vec<f32> = wx[columns.clone()]
-            .iter()
-            .flat_map(|&w| lanes.map(|l| if l.is_some() { w } else { 0.0 }))
-            .collect();
-        let mut grid = GridRows::new(lane_wx.len());
-        for (j, &(ly, ty)) in taps.iter().enumerate() {
-            let wy = fade.weight_y((area.y + j) * subsample);
-            if wy <= 0.0 {
-                continue;
-            }
-            let (top, bottom) = grid.at(ly, |r, maps| {
-                self.interpolate_row(r, lanes, &taps[columns.clone()], maps)
-            });
-            let start = (area.y + j) * stride + (area.x + first) * BPP;
-            blend_row(
-                &mut data[start..start + lane_wx.len()],
-                &lane_wx,
-                wy,
-                ty,
-                top,
-                bottom,
-            );
-        }
-    }
-
-    /// Row `r` of the maps, interpolated across the area at every lane: the
-    /// horizontal half of the bilinear upsampling.
-    fn interpolate_row<const BPP: usize>(
-        &self,
-        r: usize,
-        lanes: [Option<usize>; BPP],
-        taps: &[(usize, f32)],
-        out: &mut Maps,
-    ) {
-        let row = r * self.res..(r + 1) * self.res;
-        // Per lane of a pixel, the rows it reads of the base, gain and input.
-        let maps = lanes.map(|lane| {
-            lane.map(|c| {
-                [&self.base[c], &self.gain[c], &self.input[c]].map(|map| &map[row.clone()])
-            })
+    /// Bilinear sample of a res × res `map` at `u` (fractions of the crop),
+    /// taken at the crop's nearest point when `u` lies outside it.
+    fn sample(&self, map: &[f32], u: [f32; 2]) -> f32 {
+        let res = self.res;
+        let last = (res - 1) as f32;
+        let [(x, tx), (y, ty)] = u.map(|u| {
+            let p = (u * res as f32 - 0.5).clamp(0.0, last);
+            let lo = p.floor() as usize;
+            (lo, p - lo as f32)
         });
-        // a + (b − a) · t, with a and b − a (per map and lane) those of a map
-        // column that the next few pixels share. They stay zero on padding.
-        let (mut column, mut a, mut d) = (None, [[0f32; BPP]; 3], [[0f32; BPP]; 3]);
-        let outs = (out.base.chunks_exact_mut(BPP))
-            .zip(out.gain.chunks_exact_mut(BPP))
-            .zip(out.input.chunks_exact_mut(BPP));
-        for (&(lx, tx), ((base, gain), input)) in taps.iter().zip(outs) {
-            if column != Some(lx) {
-                column = Some(lx);
-                for (lane, rows) in maps.iter().enumerate() {
-                    if let Some(rows) = rows {
-                        for (m, row) in rows.iter().enumerate() {
-                            (a[m][lane], d[m][lane]) = (row[lx], row[lx + 1] - row[lx]);
-                        }
-                    }
-                }
-            }
-            for ((out, a), d) in [base, gain, input].into_iter().zip(&a).zip(&d) {
-                for ((o, a), d) in out.iter_mut().zip(a).zip(d) {
-                    *o = a + d * tx;
-                }
-            }
-        }
+        let at = |x: usize, y: usize| map[y * res + x];
+        let (x1, y1) = ((x + 1).min(res - 1), (y + 1).min(res - 1));
+        let top = at(x, y) + (at(x1, y) - at(x, y)) * tx;
+        let bottom = at(x, y1) + (at(x1, y1) - at(x, y1)) * tx;
+        top + (bottom - top) * ty
     }
 }
 
@@ -707,36 +589,82 @@ fn bound_invented_light(input: &[f32], relit: &[f32], n: usize) -> Vec<f32> {
     out
 }
 
-/// Radius, as a fraction of the network's resolution, of the blur that keeps the
-/// network's colour noise out of the lighting change.
-const GAIN_SMOOTHING: f32 = 0.06;
+/// Radius, as a fraction of the network's resolution, of the blur of the
+/// brightness part of the gain (its mean over the channels): a fifth of the
+/// crop, so the change has no step at the edges of what the network relights
+/// differently (hair and skin, a collar, a jacket against a wall).
+const BRIGHTNESS_SMOOTHING: f32 = 0.45;
+/// Radius of a finer blur of the brightness part: the shading the light puts
+/// on the face (a nose's shadow, a lit cheek), kept only up to
+/// [`SHADING_DETAIL`] from the coarse field.
+const SHADING_SMOOTHING: f32 = 0.06;
+/// How far, in log gain, the finer blur may depart from the coarse one (2%).
+const SHADING_DETAIL: f32 = 0.02;
+/// Radius of the blur of the colour part of the gain (each channel's log gain
+/// less the mean): a light's colour changes slowly over a face, and the
+/// network's colour noise would otherwise blotch the skin.
+const COLOUR_SMOOTHING: f32 = 0.45;
 
-/// The relit image as the input times a smooth per-channel gain: the network's
-/// lighting change without its pixel-scale colour noise, which the transfer
-/// would otherwise paint onto the skin as blotches. The gain is blurred in the
-/// log domain over `GAIN_SMOOTHING` of the image.
-fn smooth_gain_relit(input: &[f32], relit: &[f32], res: usize) -> Vec<f32> {
-    let n = res * res;
-    let radius = ((GAIN_SMOOTHING * res as f32).round() as usize).max(1);
-    let mut out = vec![0f32; 3 * n];
-    for c in 0..3 {
-        let (i, r) = (&input[c * n..(c + 1) * n], &relit[c * n..(c + 1) * n]);
-        let log_gain: Vec<f32> = i
-            .iter()
-            .zip(r)
-            .map(|(i, r)| {
-                ((r + GAIN_EPSILON) / (i + GAIN_EPSILON))
-                    .clamp(1.0 / MAX_GAIN, MAX_GAIN)
-                    .ln()
-            })
-            .collect();
-        let smooth = box_blur(&box_blur(&log_gain, res, radius), res, radius);
-        for (k, o) in out[c * n..(c + 1) * n].iter_mut().enumerate() {
-            *o = (i[k] + GAIN_EPSILON) * smooth[k].exp() - GAIN_EPSILON;
-        }
-    }
-    out
+/// Two box blurs of a res × res map, of radius `fraction` of `res`.
+fn blur(field: &[f32], res: usize, fraction: f32) -> Vec<f32> {
+    let radius = ((fraction * res as f32).round() as usize).max(1);
+    box_blur(&box_blur(field, res, radius), res, radius)
 }
+
+/// Per channel, the log of the gain the relit image makes of the input,
+/// bounded by [`MAX_GAIN`] each way and smoothed: brightness over
+/// [`BRIGHTNESS_SMOOTHING`] with shading detail, colour over
+/// [`COLOUR_SMOOTHING`]. A gain that is not finite (the network's NaN) counts
+/// as no change.
+fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize) -> [Vec<f32>; 3] {
+    let n = res * res;
+    let log_gain = |c: usize| -> Vec<f32> {
+        (c * n..(c + 1) * n)
+            .map(|i| {
+                let g = ((relit[i] + GAIN_EPSILON) / (input[i] + GAIN_EPSILON)).ln();
+                if g.is_finite() {
+                    g.clamp(-MAX_GAIN.ln(), MAX_GAIN.ln())
+                } else {
+                    0.0
+                }
+            })
+            .collect()
+    };
+    let gains = [log_gain(0), log_gain(1), log_gain(2)];
+    // Each pixel counts by its brightness: the ratios of dark pixels (hair, a
+    // dark room) are the network's least certain and its largest, and would
+    // otherwise spill over the face, which then clips where they do not.
+    let weight: Vec<f32> = (0..n).map(|i| luma(input, n, i) + WEIGHT_FLOOR).collect();
+    let weighted_blur = |field: &[f32], fraction: f32| -> Vec<f32> {
+        let product: Vec<f32> = field.iter().zip(&weight).map(|(f, w)| f * w).collect();
+        blur(&product, res, fraction)
+            .iter()
+            .zip(blur(&weight, res, fraction))
+            .map(|(p, w)| p / w)
+            .collect()
+    };
+    let mean: Vec<f32> = (0..n)
+        .map(|i| (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
+        .collect();
+    let coarse = weighted_blur(&mean, BRIGHTNESS_SMOOTHING);
+    let brightness: Vec<f32> = coarse
+        .iter()
+        .zip(weighted_blur(&mean, SHADING_SMOOTHING))
+        .map(|(c, f)| c + (f - c).clamp(-SHADING_DETAIL, SHADING_DETAIL))
+        .collect();
+    gains.map(|g| {
+        let colour: Vec<f32> = g.iter().zip(&mean).map(|(g, m)| g - m).collect();
+        weighted_blur(&colour, COLOUR_SMOOTHING)
+            .iter()
+            .zip(&brightness)
+            .map(|(c, b)| c + b)
+            .collect()
+    })
+}
+
+/// Added to each pixel's luma as its weight in the gain's blur, so black
+/// regions still count a little.
+const WEIGHT_FLOOR: f32 = 0.02;
 
 /// A box blur of a res × res field, `radius` each way, shrinking at the borders.
 fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
@@ -756,102 +684,6 @@ fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
     };
     let rows = along(field, &|y, x| y * res + x);
     along(&rows, &|x, y| y * res + x)
-}
-
-/// Bilinear taps from `size` samples of a frame onto `res` samples of a map:
-/// per frame sample, the lower map index and the weight of the upper one.
-fn taps(res: usize, size: usize) -> Vec<(usize, f32)> {
-    let scale = res as f32 / size as f32;
-    (0..size)
-        .map(|i| {
-            let p = ((i as f32 + 0.5) * scale - 0.5).clamp(0.0, (res - 1) as f32);
-            let lo = (p.floor() as usize).min(res.saturating_sub(2));
-            (lo, p - lo as f32)
-        })
-        .collect()
-}
-
-/// The three maps at one map row, interpolated to every lane of an area's row.
-struct Maps {
-    base: Vec<f32>,
-    gain: Vec<f32>,
-    input: Vec<f32>,
-}
-
-/// Two consecutive rows of `Maps`, kept while the output rows they serve
-/// (about `size / res` of them) go by. Row `r` lives in slot `r % 2`.
-struct GridRows {
-    held: [Option<usize>; 2],
-    slots: [Maps; 2],
-}
-
-impl GridRows {
-    fn new(lanes: usize) -> GridRows {
-        let maps = || Maps {
-            base: vec![0.0; lanes],
-            gain: vec![0.0; lanes],
-            input: vec![0.0; lanes],
-        };
-        GridRows {
-            held: [None; 2],
-            slots: [maps(), maps()],
-        }
-    }
-
-    /// Rows `ly` and `ly + 1`, filling in with `fill` those not held.
-    fn at(&mut self, ly: usize, fill: impl Fn(usize, &mut Maps)) -> (&Maps, &Maps) {
-        for r in [ly, ly + 1] {
-            if self.held[r % 2] != Some(r) {
-                fill(r, &mut self.slots[r % 2]);
-                self.held[r % 2] = Some(r);
-            }
-        }
-        (&self.slots[ly % 2], &self.slots[(ly + 1) % 2])
-    }
-}
-
-/// Blends one row of lanes: the vertical half of the bilinear upsampling, then
-/// `v + w · (R + g · (v − I) − v)` rounded, with `w` the fade, in exactly the
-/// operations of a per-pixel bilinear sample so the bytes do not change.
-fn blend_row(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
-    // As in `weighted_sum`: AVX2, where the CPU has it, made the paste 1.7-1.8
-    // times as fast on the build machine. The results are the same, as both
-    // builds run the same IEEE operations in the same order (Rust never fuses a
-    // multiply and an add on its own).
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { blend_row_avx2(row, wx, wy, ty, top, bottom) };
-    }
-    blend_row_portable(row, wx, wy, ty, top, bottom)
-}
-
-/// `blend_row_portable` built for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn blend_row_avx2(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
-    blend_row_portable(row, wx, wy, ty, top, bottom)
-}
-
-// Always inlined, so that `blend_row_avx2` holds a copy built for AVX2.
-#[inline(always)]
-fn blend_row_portable(row: &mut [u8], wx: &[f32], wy: f32, ty: f32, top: &Maps, bottom: &Maps) {
-    let uy = 1.0 - ty;
-    // Equal lengths up front let the compiler drop the bounds checks.
-    let n = row.len();
-    let (wx, top_base, top_gain, top_input) =
-        (&wx[..n], &top.base[..n], &top.gain[..n], &top.input[..n]);
-    let (bottom_base, bottom_gain, bottom_input) =
-        (&bottom.base[..n], &bottom.gain[..n], &bottom.input[..n]);
-    for k in 0..n {
-        let v = row[k] as f32;
-        let base = top_base[k] * uy + bottom_base[k] * ty;
-        let gain = top_gain[k] * uy + bottom_gain[k] * ty;
-        let input = top_input[k] * uy + bottom_input[k] * ty;
-        let relit = base + gain * (v - input);
-        let w = wy * wx[k];
-        row[k] = round_to_u8(v + w * (relit - v));
-    }
 }
 
 /// `x.round().clamp(0.0, 255.0) as u8` (NaN to 0 as there) in operations that
@@ -875,60 +707,8 @@ fn round_to_u8(x: f32) -> u8 {
     (shifted.to_bits() + u32::from(c - whole == 0.5)) as u8
 }
 
-/// Weight of the lighting change by distance to the crop's inner edges.
-struct Fade {
-    crop: Crop,
-    feather: f32,
-    /// How much of the change shows anywhere, in [0, 1].
-    strength: f32,
-    /// Which crop edges lie inside the frame: left, right, top, bottom.
-    inner: [bool; 4],
-}
-
-impl Fade {
-    fn new(crop: Crop, width: usize, height: usize, feather: usize, strength: f32) -> Fade {
-        Fade {
-            crop,
-            feather: feather as f32,
-            strength: strength.clamp(0.0, 1.0),
-            inner: [
-                crop.x > 0,
-                crop.x + crop.size < width,
-                crop.y > 0,
-                crop.y + crop.size < height,
-            ],
-        }
-    }
-
-    fn ramp(&self, from_low: f32, from_high: f32, low_inner: bool, high_inner: bool) -> f32 {
-        if self.feather <= 0.0 {
-            return 1.0;
-        }
-        let mut w: f32 = 1.0;
-        if low_inner {
-            w = w.min(from_low / self.feather);
-        }
-        if high_inner {
-            w = w.min(from_high / self.feather);
-        }
-        // Smoothstep: no kink where the fade starts or ends, which the eye reads as an edge.
-        let t = w.clamp(0.0, 1.0);
-        t * t * (3.0 - 2.0 * t)
-    }
-
-    /// `x` in frame pixels.
-    fn weight_x(&self, x: usize) -> f32 {
-        let from_left = x as f32 - self.crop.x as f32 + 0.5;
-        let from_right = (self.crop.x + self.crop.size) as f32 - x as f32 - 0.5;
-        self.ramp(from_left, from_right, self.inner[0], self.inner[1])
-    }
-
-    fn weight_y(&self, y: usize) -> f32 {
-        let from_top = y as f32 - self.crop.y as f32 + 0.5;
-        let from_bottom = (self.crop.y + self.crop.size) as f32 - y as f32 - 0.5;
-        self.strength * self.ramp(from_top, from_bottom, self.inner[2], self.inner[3])
-    }
-}
+mod gain_field;
+use gain_field::GainField;
 
 #[cfg(test)]
 mod reference;

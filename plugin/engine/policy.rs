@@ -434,7 +434,7 @@ impl FramePolicy {
                 .zip(&last.relit)
                 .map(|((now, then), relit)| relit + (now - then))
                 .collect();
-            let carried = LightingChange::new(&image, &estimate, res, frame.format, frame.matrix);
+            let carried = LightingChange::new(&image, &estimate, res);
             return Ok(Outcome {
                 action: Action::Reused(why),
                 change: Some(self.carried.insert(carried)),
@@ -453,7 +453,7 @@ impl FramePolicy {
             });
         };
         self.counts.relit += 1;
-        let change = LightingChange::new(&image, &relit, res, frame.format, frame.matrix);
+        let change = LightingChange::new(&image, &relit, res);
         let last = self.last.insert(Processed {
             image,
             relit,

@@ -42,7 +42,8 @@ pub struct TrackerSettings {
     pub min_confidence: f32,
     /// Frames a lost face's crop is kept at full weight before fading.
     pub hold_frames: u32,
-    /// Frames a fade out or in takes.
+    /// Frames a fade out or in takes: half a second at 30 fps, so a relit face
+    /// brightening by 10 levels comes in by under a level a frame.
     pub fade_frames: u32,
     /// One Euro filter: the cutoff (Hz) of a still face.
     pub min_cutoff: f32,
@@ -59,7 +60,7 @@ impl Default for TrackerSettings {
             face_index: 0,
             min_confidence: 0.9,
             hold_frames: 6,
-            fade_frames: 8,
+            fade_frames: 15,
             min_cutoff: 0.5,
             beta: 8.0,
             crop: CropRule::TRAINING,

@@ -1,8 +1,9 @@
-//! The crop and the paste as first written, kept to hold faster ones to: one
-//! channel at a time, each paste sample bilinearly interpolated on its own,
-//! the crop resampled horizontally first.
+//! The crop and the paste written plainly, kept to hold faster ones to: one
+//! channel at a time, the crop resampled horizontally first, each paste
+//! sample of the gain field interpolated on its own over the whole frame.
 
-use super::{AreaWeights, Crop, Fade, Frame, FrameMut, LightingChange, PixelFormat, Plane};
+use super::gain_field::dither;
+use super::{AreaWeights, Crop, Frame, FrameMut, GainField, LightingChange, PixelFormat, Plane};
 
 /// For packed RGB formats: byte offsets of R, G and B and bytes per pixel.
 pub fn packed(format: PixelFormat) -> Option<([usize; 3], usize)> {
@@ -107,80 +108,59 @@ pub fn sample_crop(frame: &Frame, crop: Crop, res: usize) -> Vec<f32> {
     out
 }
 
+/// The paste: every byte of every plane, each sample of the field
+/// interpolated on its own.
 pub fn apply(change: &LightingChange, frame: &mut FrameMut, crop: Crop, feather: usize) {
-    let (fw, fh) = (frame.width, frame.height);
-    let fade = Fade::new(crop, fw, fh, feather, 1.0);
-    let (x, y, size) = (crop.x, crop.y, crop.size);
+    let (width, height) = (frame.width, frame.height);
+    let field = GainField::new(
+        change,
+        crop,
+        feather,
+        1.0,
+        frame.format,
+        frame.matrix,
+        (width, height),
+    );
     match packed(frame.format) {
         Some((offsets, bpp)) => {
             let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
-            for (c, &off) in offsets.iter().enumerate() {
-                apply_channel(change, data, stride, off, bpp, x, y, size, c, &fade, 1);
+            for (c, offset) in offsets.into_iter().enumerate() {
+                apply_channel(&field, (data, stride, offset, bpp), (width, height), c, 1);
             }
         }
         None => {
             let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
-            apply_channel(change, data, stride, 0, 1, x, y, size, 0, &fade, 1);
+            apply_channel(&field, (data, stride, 0, 1), (width, height), 0, 1);
             let (sub, places) = chroma(frame.format);
-            let (cx, cy, cs) = (crop.x / sub, crop.y / sub, crop.size / sub);
+            let size = (width.div_ceil(sub), height.div_ceil(sub));
             for (k, (plane, offset, step)) in places.into_iter().enumerate() {
                 let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
-                let c = k + 1;
-                apply_channel(
-                    change, data, stride, offset, step, cx, cy, cs, c, &fade, sub,
-                );
+                apply_channel(&field, (data, stride, offset, step), size, k + 1, sub);
             }
         }
     }
 }
 
-#[allow(clippy::too_many_arguments)]
+/// Applies channel `channel` of `field` to the samples of one plane (its
+/// bytes, stride, the channel's byte offset and bytes between samples), a
+/// plane of `width` × `height` samples each `subsample` frame pixels wide.
 fn apply_channel(
-    change: &LightingChange,
-    data: &mut [u8],
-    stride: usize,
-    offset: usize,
-    step: usize,
-    x0: usize,
-    y0: usize,
-    size: usize,
+    field: &GainField,
+    (data, stride, offset, step): (&mut [u8], usize, usize, usize),
+    (width, height): (usize, usize),
     channel: usize,
-    fade: &Fade,
     subsample: usize,
 ) {
-    let res = change.res;
-    let scale = res as f32 / size as f32;
-    let taps: Vec<(usize, f32)> = (0..size)
-        .map(|i| {
-            let p = ((i as f32 + 0.5) * scale - 0.5).clamp(0.0, (res - 1) as f32);
-            let lo = (p.floor() as usize).min(res.saturating_sub(2));
-            (lo, p - lo as f32)
-        })
-        .collect();
-    let (base, input, gain) = (
-        &change.base[channel],
-        &change.input[channel],
-        &change.gain[channel],
+    let (taps_x, taps_y) = (
+        field.taps(width, subsample, 0),
+        field.taps(height, subsample, 1),
     );
-    let sample = |map: &[f32], (ly, ty): (usize, f32), (lx, tx): (usize, f32)| {
-        let a = map[ly * res + lx];
-        let b = map[ly * res + lx + 1];
-        let c = map[(ly + 1) * res + lx];
-        let d = map[(ly + 1) * res + lx + 1];
-        (a + (b - a) * tx) * (1.0 - ty) + (c + (d - c) * tx) * ty
-    };
-    for (j, &ty) in taps.iter().enumerate() {
-        let row = (y0 + j) * stride + offset;
-        let wy = fade.weight_y((y0 + j) * subsample);
-        for (i, &tx) in taps.iter().enumerate() {
-            let w = wy * fade.weight_x((x0 + i) * subsample);
-            if w <= 0.0 {
-                continue;
-            }
-            let at = row + (x0 + i) * step;
-            let v = data[at] as f32;
-            let relit = sample(base, ty, tx) + sample(gain, ty, tx) * (v - sample(input, ty, tx));
-            data[at] = (v + w * (relit - v)).round().clamp(0.0, 255.0) as u8;
+    for (y, &ty) in taps_y.iter().enumerate() {
+        for (x, &tx) in taps_x.iter().enumerate() {
+            let at = y * stride + x * step + offset;
+            let (gain, shift) = field.at(channel, tx, ty);
+            let value = gain * data[at] as f32 + shift + dither(x, y);
+            data[at] = value.round().clamp(0.0, 255.0) as u8;
         }
     }
 }

@@ -1,4 +1,6 @@
 use super::*;
+use crate::frame::gain_field::INNER_RADIUS;
+use crate::frame::gain_field::{blend_row, blend_row_portable, dither};
 use crate::frame::reference;
 
 fn rgb_frame(w: usize, h: usize, f: impl Fn(usize, usize) -> [u8; 3]) -> Vec<u8> {
@@ -73,13 +75,7 @@ fn identity_change_keeps_the_frame() {
         size: 64,
     };
     let input = sample_crop(&Frame::packed_rgb(&data, 64, 64), crop, 16);
-    let change = LightingChange::new(
-        &input,
-        &input,
-        16,
-        PixelFormat::Rgb,
-        YuvMatrix::BT601_LIMITED,
-    );
+    let change = LightingChange::new(&input, &input, 16);
     let mut fm = FrameMut {
         format: PixelFormat::Rgb,
         width: 64,
@@ -158,22 +154,22 @@ fn crops(width: usize, height: usize) -> Vec<Crop> {
     ]
 }
 
-/// A change from random network images, or (`wild`) random maps that leave
-/// the range of real ones so the clamping at 0 and 255 is exercised too.
-fn random_change(res: usize, format: PixelFormat, wild: bool, noise: &mut Noise) -> LightingChange {
+/// A change from random network images, or (`wild`) random gains far beyond
+/// real ones and inputs out of range, so the clamping at 0 and 255 is
+/// exercised too.
+fn random_change(res: usize, wild: bool, noise: &mut Noise) -> LightingChange {
     let n = res * res;
     let mut image = |lo, hi| -> Vec<f32> { (0..3 * n).map(|_| noise.uniform(lo, hi)).collect() };
     if !wild {
         let (input, relit) = (image(0.0, 1.0), image(0.0, 1.0));
-        return LightingChange::new(&input, &relit, res, format, YuvMatrix::BT709_LIMITED);
+        return LightingChange::new(&input, &relit, res);
     }
-    let (base, input) = (image(-60.0, 320.0), image(-60.0, 320.0));
+    let (log_gain, input) = (image(-3.0, 3.0), image(-0.5, 1.5));
     let channels = |v: Vec<f32>| [0, 1, 2].map(|c| v[c * n..(c + 1) * n].to_vec());
     LightingChange {
         res,
-        base: channels(base),
-        input: channels(input),
-        gain: [0, 1, 2].map(|_| (0..n).map(|_| noise.uniform(0.0, MAX_GAIN)).collect()),
+        log_gain: channels(log_gain),
+        smooth_input: channels(input),
     }
 }
 
@@ -209,7 +205,7 @@ fn paste_matches_the_reference_byte_for_byte() {
                 // Network resolutions below and above the crop's: 40 > every
                 // crop here but the largest.
                 for res in [16, 7, 40] {
-                    let change = random_change(res, format, cases % 2 == 1, &mut noise);
+                    let change = random_change(res, cases % 2 == 1, &mut noise);
                     for feather in [0, 3, 100] {
                         let (same, n) = paste_both(&buffers, &change, crop, feather);
                         assert!(
@@ -236,30 +232,29 @@ fn paste_matches_the_reference_at_full_size() {
     for format in FORMATS {
         let buffers = random_frame(format, 1280, 720, &mut noise);
         let crop = Crop::centred(1280, 720, 0.5, 0.5, 1.0);
-        let change = random_change(96, format, false, &mut noise);
+        let change = random_change(96, false, &mut noise);
         assert!(paste_both(&buffers, &change, crop, 43).0, "{format:?}");
     }
 }
 
 #[test]
-fn paste_matches_the_reference_where_the_maps_are_not_finite() {
-    // The network can put out NaN; bytes under it become 0 where the change
-    // applies and stay as they were where the fade is zero.
+fn a_network_output_that_is_not_finite_changes_nothing_there() {
+    // The policy passes such frames through, but the change must not turn
+    // the frame black or into noise if one gets here: a gain that is not
+    // finite counts as none.
     let mut noise = Noise(0xbad);
+    let res = 16;
+    let input: Vec<f32> = (0..3 * res * res)
+        .map(|_| noise.uniform(0.2, 0.8))
+        .collect();
+    let relit = vec![f32::NAN; input.len()];
+    let change = LightingChange::new(&input, &relit, res);
     for format in FORMATS {
         let buffers = random_frame(format, 37, 29, &mut noise);
-        let mut change = random_change(7, format, false, &mut noise);
-        change.base[0][3] = f32::NAN;
-        change.base[2][20] = f32::INFINITY;
-        change.input[1][30] = f32::NEG_INFINITY;
-        change.gain[0][9] = f32::NAN;
-        // Under the first chroma column, which has zero fade with an odd crop.
-        change.gain[1][7] = f32::NAN;
         for crop in crops(37, 29) {
-            for feather in [0, 3] {
-                let (same, _) = paste_both(&buffers, &change, crop, feather);
-                assert!(same, "{format:?} {crop:?} feather {feather}");
-            }
+            let (same, changed) = paste_both(&buffers, &change, crop, 3);
+            assert!(same, "{format:?} {crop:?}");
+            assert_eq!(changed, 0, "{format:?} {crop:?}");
         }
     }
 }
@@ -366,19 +361,17 @@ fn both_builds_of_the_inner_loops_agree() {
     let mut noise = Noise(0xa1b2);
     let n = 1000 + 7;
     let mut map = |lo, hi| -> Vec<f32> { (0..n).map(|_| noise.uniform(lo, hi)).collect() };
-    let mut maps = || Maps {
-        base: map(-60.0, 320.0),
-        gain: map(0.0, MAX_GAIN),
-        input: map(-60.0, 320.0),
-    };
-    let (top, mut bottom) = (maps(), maps());
-    bottom.base[5] = f32::NAN;
-    bottom.input[17] = f32::INFINITY;
-    let wx = map(0.0, 1.0);
+    let (top_gain, top_offset) = (map(0.0, MAX_GAIN), map(-60.0, 60.0));
+    let (mut bottom_gain, mut bottom_offset) = (map(0.0, MAX_GAIN), map(-60.0, 60.0));
+    bottom_gain[5] = f32::NAN;
+    bottom_offset[17] = f32::INFINITY;
+    let top = (&top_gain[..], &top_offset[..]);
+    let bottom = (&bottom_gain[..], &bottom_offset[..]);
+    let dither: Vec<f32> = (0..n).map(|x| dither(x, 1)).collect();
     let row: Vec<u8> = (0..n).map(|_| noise.byte()).collect();
     let (mut chosen, mut portable) = (row.clone(), row.clone());
-    blend_row(&mut chosen, &wx, 0.7, 0.3, &top, &bottom);
-    blend_row_portable(&mut portable, &wx, 0.7, 0.3, &top, &bottom);
+    blend_row(&mut chosen, 0.3, top, bottom, &dither);
+    blend_row_portable(&mut portable, 0.3, top, bottom, &dither);
     assert_eq!(chosen, portable);
     assert_ne!(chosen, row);
 
@@ -390,4 +383,201 @@ fn both_builds_of_the_inner_loops_agree() {
     weighted_sum_portable(&mut portable, &rows, &weights);
     let bits = |v: Vec<f32>| -> Vec<u32> { v.into_iter().map(f32::to_bits).collect() };
     assert_eq!(bits(chosen), bits(portable));
+}
+
+// The change as a gain field over the frame.
+
+/// The change `relit = gain · input` (per channel) of the crop of an RGB frame,
+/// applied around the crop with `feather`: the frame before and after.
+fn gained(
+    (w, h): (usize, usize),
+    pixel: impl Fn(usize, usize) -> [u8; 3],
+    crop: Crop,
+    feather: usize,
+    gain: impl Fn(usize, usize) -> f32,
+) -> (Vec<u8>, Vec<u8>) {
+    let before = rgb_frame(w, h, pixel);
+    let res = 32;
+    let input = sample_crop(&Frame::packed_rgb(&before, w, h), crop, res);
+    let relit: Vec<f32> = input
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v * gain(i / (res * res), i % (res * res)))
+        .collect();
+    let mut after = before.clone();
+    let mut fm = FrameMut {
+        format: PixelFormat::Rgb,
+        width: w,
+        height: h,
+        planes: [(&mut after, w * 3), (&mut [], 0), (&mut [], 0)],
+        matrix: YuvMatrix::BT601_LIMITED,
+    };
+    LightingChange::new(&input, &relit, res).apply(&mut fm, crop, feather);
+    (before, after)
+}
+
+#[test]
+fn the_change_fades_out_smoothly_beyond_the_crop() {
+    let (w, h) = (240, 160);
+    let crop = Crop {
+        x: 90,
+        y: 50,
+        size: 60,
+    };
+    let feather = 60;
+    let (before, after) = gained((w, h), |_, _| [100; 3], crop, feather, |_, _| 1.5);
+    let ratio = |x: usize, y: usize| {
+        let i = (y * w + x) * 3 + 1;
+        (after[i] as f32 / before[i] as f32).ln()
+    };
+    // Whole at the centre: the network's gain (with its ε of 0.02) on the
+    // frame's value plus two levels, dithered by less than half a level.
+    let i = 100.0 / 255.0;
+    let gain = (1.5 * i + 0.02) / (i + 0.02);
+    let centre = after[(80 * w + 120) * 3 + 1] as f32;
+    let expected = gain * 102.0 - 2.0;
+    assert!(
+        (centre - expected).abs() <= 1.0,
+        "{centre} at the centre, not {expected}"
+    );
+    // Nothing beyond the fade; something at the crop's corners and beyond its sides.
+    for y in 0..h {
+        for x in 0..w {
+            let distance = (x as f32 + 0.5 - 120.0).hypot(y as f32 + 0.5 - 80.0);
+            if distance > INNER_RADIUS * 60.0 + feather as f32 + 2.0 {
+                assert_eq!(ratio(x, y), 0.0, "({x}, {y})");
+            }
+        }
+    }
+    assert!(
+        ratio(91, 51) > 0.1,
+        "at the crop's corner: {}",
+        ratio(91, 51)
+    );
+    assert!(
+        ratio(70, 80) > 0.1,
+        "beyond the crop's side: {}",
+        ratio(70, 80)
+    );
+    // No step anywhere: a smoothstep of ln 1.5 over the feather rises at most
+    // 1.5 · ln 1.5 / feather a pixel (0.015), and dither and rounding move
+    // each pixel by up to a level (0.01) either way. A box would step by 0.4.
+    let mut steepest = 0f32;
+    for y in 1..h {
+        for x in 1..w {
+            steepest = steepest
+                .max((ratio(x, y) - ratio(x - 1, y)).abs())
+                .max((ratio(x, y) - ratio(x, y - 1)).abs());
+        }
+    }
+    assert!(steepest < 0.036, "steepest step {steepest}");
+}
+
+#[test]
+fn colour_noise_from_the_network_stays_out_of_the_frame() {
+    // Each network pixel's colour off by up to ±15%, as the network's own
+    // noise: the frame should take the mean tint, not the blotches.
+    let (w, h) = (160, 160);
+    let crop = Crop {
+        x: 16,
+        y: 16,
+        size: 128,
+    };
+    let mut noise = Noise(0xc010);
+    let jitter: Vec<f32> = (0..3 * 32 * 32)
+        .map(|_| noise.uniform(-0.15, 0.15))
+        .collect();
+    let tint = [1.3, 1.1, 0.9];
+    let (_, after) = gained(
+        (w, h),
+        |_, _| [120; 3],
+        crop,
+        20,
+        |c, i| tint[c] * (1.0 + jitter[c * 32 * 32 + i]),
+    );
+    // Where the change is whole (within the inner circle), each channel less
+    // the pixel's mean.
+    let mut spread = [(f32::MAX, f32::MIN); 3];
+    for y in 48..112 {
+        for x in 48..112 {
+            if (x as f32 + 0.5 - 80.0).hypot(y as f32 + 0.5 - 80.0) > INNER_RADIUS * 128.0 {
+                continue;
+            }
+            let p = &after[(y * w + x) * 3..(y * w + x) * 3 + 3];
+            let mean = p.iter().map(|&v| v as f32).sum::<f32>() / 3.0;
+            for c in 0..3 {
+                let d = p[c] as f32 - mean;
+                spread[c] = (spread[c].0.min(d), spread[c].1.max(d));
+            }
+        }
+    }
+    for (c, (lo, hi)) in spread.into_iter().enumerate() {
+        assert!(
+            hi - lo <= 4.0,
+            "channel {c} colour spread {lo}..{hi} levels"
+        );
+    }
+    // And the tint itself came through: red above blue by about 0.4 · 125.
+    let p = &after[(80 * w + 80) * 3..(80 * w + 80) * 3 + 3];
+    assert!(p[0] as i32 - p[2] as i32 > 40, "{p:?}");
+}
+
+#[test]
+fn yuv_and_rgb_frames_take_the_same_change() {
+    // A smooth, coloured frame, and the same frame as Y444, relit with a warm
+    // tint: the YUV paste's gain and chroma offsets must give the RGB paste's
+    // colours, to within the rounding of the conversions.
+    let (w, h) = (96, 80);
+    let matrix = YuvMatrix::BT709_LIMITED;
+    let pixel = |x: usize, y: usize| [60 + x as u8, 150 - y as u8, 90 + (x + y) as u8 / 3];
+    let crop = Crop {
+        x: 18,
+        y: 10,
+        size: 60,
+    };
+    let gain = |c: usize, _| [1.4, 1.1, 0.8][c];
+    let (_, rgb_after) = gained((w, h), pixel, crop, 10, gain);
+
+    let mut yuv = OwnedFrame::new(PixelFormat::Y444, (w, h), 0, matrix, || 0);
+    for y in 0..h {
+        for x in 0..w {
+            let p = pixel(x, y).map(|v| v as f32 / 255.0);
+            for (plane, v) in yuv.planes.iter_mut().zip(matrix.from_rgb(p)) {
+                plane.0[y * w + x] = v.round() as u8;
+            }
+        }
+    }
+    let res = 32;
+    let input = sample_crop(&yuv.frame(), crop, res);
+    let relit: Vec<f32> = input
+        .iter()
+        .enumerate()
+        .map(|(i, v)| v * gain(i / (res * res), 0))
+        .collect();
+    // The most a YUV frame's colours differ from the RGB frame's: before the
+    // change (the conversion's rounding) and after.
+    let worst = |yuv: &OwnedFrame, rgb: &dyn Fn(usize, usize, usize) -> u8| {
+        let mut worst = 0f32;
+        for y in 0..h {
+            for x in 0..w {
+                let yuv_at = |p: usize| yuv.planes[p].0[y * w + x] as f32;
+                let back = matrix.to_rgb(yuv_at(0), yuv_at(1), yuv_at(2));
+                for (c, v) in back.into_iter().enumerate() {
+                    worst = worst.max((v * 255.0 - rgb(x, y, c) as f32).abs());
+                }
+            }
+        }
+        worst
+    };
+    let before = worst(&yuv, &|x, y, c| pixel(x, y)[c]);
+    LightingChange::new(&input, &relit, res).apply(&mut yuv.frame_mut(), crop, 10);
+    let after = worst(&yuv, &|x, y, c| rgb_after[(y * w + x) * 3 + c]);
+    // Each paste rounds (and dithers) again, by up to a level in each plane,
+    // and YUV takes the change's colour from the smooth input rather than each
+    // pixel: three levels in all. Without the chroma offsets the tint (R up
+    // 40%, B down 20%) would be lost, tens of levels.
+    assert!(
+        after <= before + 3.0,
+        "YUV and RGB differ by {after} levels, {before} before the change"
+    );
 }

@@ -24,7 +24,7 @@ const DEFAULT_PROCESSING_LATENCY: gst::ClockTime = gst::ClockTime::from_mseconds
 const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
-const DEFAULT_FEATHER: f64 = 0.25;
+const DEFAULT_FEATHER: f64 = 0.5;
 const DEFAULT_QOS: bool = true;
 const DEFAULT_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_mseconds(500);
 const MAX_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_seconds(60);
@@ -433,9 +433,9 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecDouble::builder("feather")
                 .nick("Feather")
-                .blurb("Width, as a fraction of the face region, over which the relighting fades out towards region edges inside the frame")
+                .blurb("Width, as a fraction of the face region, over which the relighting fades out beyond a circle round the face")
                 .minimum(0.0)
-                .maximum(0.5)
+                .maximum(1.0)
                 .default_value(DEFAULT_FEATHER)
                 .mutable_playing()
                 .build(),

@@ -69,23 +69,73 @@ fn box_blur(field: &[f64], w: usize, h: usize, r: usize) -> Vec<f64> {
     pass(&rows, h, w, &|x, y| y * w + x)
 }
 
+/// The largest coherent step of a relit frame's change, and where it is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxEdge {
+    /// The step, in percent (of the log ratio of output to input luma).
+    pub score: f64,
+    /// Whether the edge runs vertically (a step across x).
+    pub vertical: bool,
+    /// Where the step is across the edge (x for a vertical edge, else y), and
+    /// where along it the run of a fifth of the frame height starts.
+    pub across: usize,
+    pub along: usize,
+}
+
 /// The box-edge score of a relit frame against its input, in percent.
 pub fn box_edge_score(input: &RgbImage, output: &RgbImage) -> f64 {
-    let (w, h) = (input.width, input.height);
+    box_edge(input, output).score
+}
+
+/// The smoothed log ratio of output to input luma that [`box_edge_score`] reads.
+fn smoothed_change(input: &RgbImage, output: &RgbImage) -> (Vec<f64>, usize) {
     // Smoothed over about 1% of the frame height, so noise and texture do not count.
+    let (w, h) = (input.width, input.height);
     let r = (h / 100).max(1);
-    let ratio = box_blur(&log_ratio(input, output, luma), w, h, r);
+    (box_blur(&log_ratio(input, output, luma), w, h, r), r)
+}
+
+/// The largest coherent step of a relit frame's change against its input.
+pub fn box_edge(input: &RgbImage, output: &RgbImage) -> BoxEdge {
+    let (w, h) = (input.width, input.height);
+    let (ratio, r) = smoothed_change(input, output);
     let step = 2 * r;
     let run = (h / 5).max(1);
     // Vertical edges: steps across x, averaged along a run of y; horizontal edges
     // likewise with the axes swapped.
     let vertical = coherent_step(&ratio, w, h, step, run, |x, y| y * w + x);
     let horizontal = coherent_step(&ratio, h, w, step, run, |y, x| y * w + x);
-    100.0 * vertical.max(horizontal)
+    let (best, is_vertical) = if vertical.0 >= horizontal.0 {
+        (vertical, true)
+    } else {
+        (horizontal, false)
+    };
+    BoxEdge {
+        score: 100.0 * best.0,
+        vertical: is_vertical,
+        across: best.1,
+        along: best.2,
+    }
+}
+
+/// The change a relit frame makes, as an image: the smoothed log ratio of
+/// output to input luma that [`box_edge_score`] reads, mid grey for none,
+/// lighter for brighter, black or white at a factor of e^±0.75 (about 2.1).
+pub fn change_map(input: &RgbImage, output: &RgbImage) -> RgbImage {
+    let (ratio, _) = smoothed_change(input, output);
+    RgbImage {
+        width: input.width,
+        height: input.height,
+        data: ratio
+            .iter()
+            .flat_map(|v| [(127.5 + 170.0 * v).round().clamp(0.0, 255.0) as u8; 3])
+            .collect(),
+    }
 }
 
 /// The largest mean step `f(a + step) - f(a - step)` across axis `a` (length
-/// `across`), averaged over `run` consecutive positions along the other axis.
+/// `across`), averaged over `run` consecutive positions along the other axis;
+/// with the `a` and the run's first position where it is.
 fn coherent_step(
     field: &[f64],
     across: usize,
@@ -93,21 +143,27 @@ fn coherent_step(
     step: usize,
     run: usize,
     at: impl Fn(usize, usize) -> usize,
-) -> f64 {
+) -> (f64, usize, usize) {
+    let mut best = (0.0, 0, 0);
     if across <= 2 * step || along < run {
-        return 0.0;
+        return best;
     }
-    let mut best: f64 = 0.0;
     let mut steps = vec![0.0; along];
     for a in step..across - step {
         for (b, s) in steps.iter_mut().enumerate() {
             *s = field[at(a + step, b)] - field[at(a - step, b)];
         }
         let mut sum: f64 = steps[..run].iter().sum();
-        best = best.max(sum.abs() / run as f64);
+        let mut consider = |sum: f64, first: usize| {
+            let mean = sum.abs() / run as f64;
+            if mean > best.0 {
+                best = (mean, a, first);
+            }
+        };
+        consider(sum, 0);
         for b in run..along {
             sum += steps[b] - steps[b - run];
-            best = best.max(sum.abs() / run as f64);
+            consider(sum, b + 1 - run);
         }
     }
     best

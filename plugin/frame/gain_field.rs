@@ -1,0 +1,436 @@
+//! The lighting change as a smooth gain field over the frame: per output
+//! channel a gain and an offset on a coarse grid round the face, bilinearly
+//! interpolated as the frame is pasted, `v ↦ g · v + o`.
+//!
+//! The field holds the network's change (continued beyond the crop as it is at
+//! the crop's nearest point) faded out round the face: whole within a circle of
+//! [`INNER_RADIUS`] of the crop's side about the crop's centre, falling by
+//! smoothstep to nothing `feather` pixels beyond. A circle has no straight
+//! edge, and its fade is the only place where the change ends.
+//!
+//! Built per frame on a grid of [`CELLS_PER_CROP`] cells across the crop (a
+//! few thousand cells, an `exp` each per channel); the paste interpolates a
+//! grid row across the plane once per cell's worth of rows and then runs one
+//! multiply-add per byte, with no division or call in the loop.
+
+use super::{Crop, FrameMut, LightingChange, PixelFormat, YuvMatrix, round_to_u8};
+
+/// Grid cells across the crop's side. The change is blurred over a fifth of
+/// the crop ([`super::BRIGHTNESS_SMOOTHING`]) and the fade spans more, so a
+/// cell of 1/32 of the crop loses nothing the bilinear interpolation needs.
+const CELLS_PER_CROP: f32 = 32.0;
+
+/// Radius, as a fraction of the crop's side, about the crop's centre within
+/// which the change shows whole: the head (the crop is 2.9 face heights, its
+/// centre a little above the face's).
+pub const INNER_RADIUS: f32 = 0.25;
+
+/// The `ε` of the gain applied to the frame, `(v' + ε) = g · (v + ε)`, in
+/// 8-bit levels: two. A pure gain would multiply the noise and rounding of
+/// near-black pixels, so their change would differ from their neighbours'; a
+/// larger one lifts black towards grey, a haze over dark hair and backgrounds.
+const LIFT: f32 = 2.0;
+
+/// The change on a grid of `columns` × `rows` cells, cell (0, 0)'s corner at
+/// `origin` in frame pixels, each `cell` frame pixels wide: per output channel
+/// (R, G, B or Y, Cb, Cr in 8-bit units) a gain and an offset.
+pub(super) struct GainField {
+    columns: usize,
+    rows: usize,
+    origin: [f32; 2],
+    cell: f32,
+    gain: [Vec<f32>; 3],
+    offset: [Vec<f32>; 3],
+    /// Per grid row, the first and last cell that changes anything; None when
+    /// none does.
+    spans: Vec<Option<(usize, usize)>>,
+}
+
+impl GainField {
+    /// The field of `change` round `crop` of a `width` × `height` frame of
+    /// `format`, shown at `strength` in [0, 1] and fading out over `feather`
+    /// pixels.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn new(
+        change: &LightingChange,
+        crop: Crop,
+        feather: usize,
+        strength: f32,
+        format: PixelFormat,
+        matrix: YuvMatrix,
+        (width, height): (usize, usize),
+    ) -> GainField {
+        let side = crop.size.max(1) as f32;
+        let cell = side / CELLS_PER_CROP;
+        let inner = INNER_RADIUS * side;
+        let feather = feather as f32;
+        let reach = inner + feather;
+        let centre = [crop.x as f32 + side / 2.0, crop.y as f32 + side / 2.0];
+        // The grid covers the fade's disc and one identity cell beyond it, so
+        // interpolation past its edge (clamped to it) changes nothing; where
+        // the frame ends first, it ends with the frame.
+        let span = |c: f32, extent: usize| {
+            let first = ((c - reach) / cell - 1.0).floor().max(0.0);
+            let last = ((c + reach) / cell + 1.0)
+                .ceil()
+                .min((extent as f32 / cell).ceil());
+            (first, ((last - first) as usize).max(2))
+        };
+        let ((x0, columns), (y0, rows)) = (span(centre[0], width), span(centre[1], height));
+        let origin = [x0 * cell, y0 * cell];
+        let strength = strength.clamp(0.0, 1.0);
+        let cells = columns * rows;
+        let mut gain = [0; 3].map(|_| vec![1f32; cells]);
+        let mut offset = [0; 3].map(|_| vec![0f32; cells]);
+        let mut spans = vec![None; rows];
+        for (gy, row_span) in spans.iter_mut().enumerate() {
+            for gx in 0..columns {
+                let p = [
+                    origin[0] + (gx as f32 + 0.5) * cell,
+                    origin[1] + (gy as f32 + 0.5) * cell,
+                ];
+                let distance = (p[0] - centre[0]).hypot(p[1] - centre[1]) - inner;
+                let weight = strength * fade(distance, feather);
+                if weight <= 0.0 {
+                    continue;
+                }
+                // Where in the network's image: the crop's nearest point.
+                let u = [p[0] - crop.x as f32, p[1] - crop.y as f32].map(|v| v / side);
+                let log_gain = change
+                    .log_gain
+                    .each_ref()
+                    .map(|g| weight * change.sample(g, u));
+                let input = change.smooth_input.each_ref().map(|i| change.sample(i, u));
+                let (g, o) = channel_gains(log_gain, input, format, matrix);
+                let i = gy * columns + gx;
+                for c in 0..3 {
+                    (gain[c][i], offset[c][i]) = (g[c], o[c]);
+                }
+                *row_span = Some(row_span.map_or((gx, gx), |(first, _)| (first, gx)));
+            }
+        }
+        GainField {
+            columns,
+            rows,
+            origin,
+            cell,
+            gain,
+            offset,
+            spans,
+        }
+    }
+
+    /// Bilinear taps from the `count` samples of a plane, each `subsample`
+    /// frame pixels wide, onto the grid along axis `axis` (0: x, 1: y): per
+    /// sample, the lower cell and the weight of the upper one.
+    pub(super) fn taps(&self, count: usize, subsample: usize, axis: usize) -> Vec<(usize, f32)> {
+        let cells = [self.columns, self.rows][axis];
+        let last = (cells - 1) as f32;
+        (0..count)
+            .map(|i| {
+                let frame = (i as f32 + 0.5) * subsample as f32;
+                let p = ((frame - self.origin[axis]) / self.cell - 0.5).clamp(0.0, last);
+                let lo = (p.floor() as usize).min(cells - 2);
+                (lo, p - lo as f32)
+            })
+            .collect()
+    }
+
+    /// Applies the field to `frame`.
+    pub(super) fn paste(&self, frame: &mut FrameMut) {
+        let size = (frame.width, frame.height);
+        for pass in frame.format.passes() {
+            let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
+            let sub = pass.subsample;
+            let plane = (size.0.div_ceil(sub), size.1.div_ceil(sub));
+            match *pass.lanes {
+                [a] => self.paste_plane([a], data, stride, plane, sub),
+                [a, b] => self.paste_plane([a, b], data, stride, plane, sub),
+                [a, b, c] => self.paste_plane([a, b, c], data, stride, plane, sub),
+                [a, b, c, d] => self.paste_plane([a, b, c, d], data, stride, plane, sub),
+                _ => unreachable!("no format has {} bytes a pixel", pass.lanes.len()),
+            }
+        }
+    }
+
+    /// The columns of a plane (taps `taps_x`) that read a changing cell in
+    /// grid rows `ly` and `ly + 1`; None when neither changes anything.
+    /// Elsewhere all four cells a pixel reads are the identity, which leaves
+    /// its bytes as they are.
+    fn changed_columns(&self, taps_x: &[(usize, f32)], ly: usize) -> Option<(usize, usize)> {
+        let span = match (self.spans[ly], self.spans[ly + 1]) {
+            (None, None) => return None,
+            (Some(a), None) | (None, Some(a)) => a,
+            (Some(a), Some(b)) => (a.0.min(b.0), a.1.max(b.1)),
+        };
+        // Taps rise with x.
+        let first = taps_x.partition_point(|&(lx, _)| lx + 1 < span.0);
+        let end = taps_x.partition_point(|&(lx, _)| lx <= span.1);
+        (first < end).then_some((first, end))
+    }
+
+    /// Applies the field to a plane of `width` × `height` pixels whose `BPP`
+    /// bytes a pixel hold the channels `lanes`: each byte `v` becomes
+    /// `g · v + o`, dithered. Each row is one flat run of bytes ("lanes"),
+    /// whatever channels they hold, so the loop over it vectorises.
+    fn paste_plane<const BPP: usize>(
+        &self,
+        lanes: [Option<usize>; BPP],
+        data: &mut [u8],
+        stride: usize,
+        (width, height): (usize, usize),
+        subsample: usize,
+    ) {
+        let (taps_x, taps_y) = (
+            self.taps(width, subsample, 0),
+            self.taps(height, subsample, 1),
+        );
+        // The columns any row changes: grid rows are interpolated over these only.
+        let Some((first, end)) = (0..self.rows - 1)
+            .filter_map(|ly| self.changed_columns(&taps_x, ly))
+            .reduce(|a, b| (a.0.min(b.0), a.1.max(b.1)))
+        else {
+            return;
+        };
+        let taps_x = &taps_x[first..end];
+        let mut rows = FieldRows::new(taps_x.len() * BPP);
+        let dithers = dither_rows(first, taps_x.len(), BPP);
+        for (y, &(ly, ty)) in taps_y.iter().enumerate() {
+            let Some((a, b)) = self.changed_columns(taps_x, ly) else {
+                continue;
+            };
+            let (top, bottom) = rows.at(ly, |r, out| self.interpolate_row(r, lanes, taps_x, out));
+            let lanes = a * BPP..b * BPP;
+            let start = y * stride + first * BPP;
+            blend_row(
+                &mut data[start + lanes.start..start + lanes.end],
+                ty,
+                (&top.gain[lanes.clone()], &top.offset[lanes.clone()]),
+                (&bottom.gain[lanes.clone()], &bottom.offset[lanes.clone()]),
+                &dithers[y % DITHER][lanes],
+            );
+        }
+    }
+
+    /// Grid row `r` interpolated across the plane's columns (taps `taps`) at
+    /// every lane: the horizontal half of the bilinear upsampling. Padding
+    /// lanes keep a gain of 1 and an offset of 0, which leave their bytes as
+    /// they are.
+    fn interpolate_row<const BPP: usize>(
+        &self,
+        r: usize,
+        lanes: [Option<usize>; BPP],
+        taps: &[(usize, f32)],
+        out: &mut FieldRow,
+    ) {
+        let row = r * self.columns..(r + 1) * self.columns;
+        let outs = out
+            .gain
+            .chunks_exact_mut(BPP)
+            .zip(out.offset.chunks_exact_mut(BPP));
+        for (&(lx, tx), (gain, offset)) in taps.iter().zip(outs) {
+            for (lane, channel) in lanes.iter().enumerate() {
+                let Some(c) = *channel else {
+                    continue;
+                };
+                for (map, out) in [
+                    (&self.gain[c], &mut gain[lane]),
+                    (&self.offset[c], &mut offset[lane]),
+                ] {
+                    let m = &map[row.clone()];
+                    *out = m[lx] + (m[lx + 1] - m[lx]) * tx;
+                }
+            }
+        }
+    }
+
+    /// Gain and offset of channel `c` at a pixel with taps `x` and `y` (from
+    /// [`GainField::taps`]): one bilinear sample on its own, for the reference
+    /// paste.
+    #[cfg(test)]
+    pub(super) fn at(
+        &self,
+        c: usize,
+        (lx, tx): (usize, f32),
+        (ly, ty): (usize, f32),
+    ) -> (f32, f32) {
+        let sample = |map: &[f32]| {
+            let row = |r: usize| {
+                let m = &map[r * self.columns..(r + 1) * self.columns];
+                m[lx] + (m[lx + 1] - m[lx]) * tx
+            };
+            row(ly) * (1.0 - ty) + row(ly + 1) * ty
+        };
+        (sample(&self.gain[c]), sample(&self.offset[c]))
+    }
+}
+
+/// How much of the change shows `distance` pixels beyond the inner circle:
+/// 1 within it, falling by smoothstep (no kink where the fade starts or ends,
+/// which the eye reads as an edge) to 0 at `feather` pixels beyond.
+fn fade(distance: f32, feather: f32) -> f32 {
+    if distance <= 0.0 {
+        return 1.0;
+    }
+    if feather <= 0.0 {
+        return 0.0;
+    }
+    let t = 1.0 - (distance / feather).min(1.0);
+    t * t * (3.0 - 2.0 * t)
+}
+
+/// Per output channel, the gain and offset that per-channel RGB log gains
+/// `log_gain` make of a pixel, for a frame of `format`; `input` is the smooth
+/// network input there (sRGB in [0, 1]).
+///
+/// In RGB each channel takes its own gain: the change's colour is then the
+/// same ratio of channels on every pixel, so skin texture does not turn into
+/// colour blotches. In YUV a per-channel gain would mix the planes, so luma
+/// takes the luma-weighted mean gain `g_Y` and a colour difference `B − Y`
+/// becomes `g_Y (B − Y) + (g_B − g_Y)(I_B + ε)`: the change's colour as an
+/// offset of the chroma planes, taken from the smooth input.
+fn channel_gains(
+    log_gain: [f32; 3],
+    input: [f32; 3],
+    format: PixelFormat,
+    matrix: YuvMatrix,
+) -> ([f32; 3], [f32; 3]) {
+    let rgb_gain = log_gain.map(f32::exp);
+    if !format.is_yuv() {
+        return (rgb_gain, rgb_gain.map(|g| (g - 1.0) * LIFT));
+    }
+    let (kr, kb) = (matrix.kr, matrix.kb);
+    let k = [kr, 1.0 - kr - kb, kb];
+    let lifted = input.map(|i| i.max(0.0) + LIFT / 255.0);
+    let luma: f32 = (0..3).map(|c| k[c] * lifted[c]).sum();
+    let g = (0..3).map(|c| k[c] * rgb_gain[c] * lifted[c]).sum::<f32>() / luma;
+    let (luma_offset, luma_scale, chroma_scale) = matrix.scales();
+    let shift =
+        |c: usize, kc: f32| chroma_scale / (2.0 * (1.0 - kc)) * (rgb_gain[c] - g) * lifted[c];
+    (
+        [g; 3],
+        [
+            (g - 1.0) * (luma_scale * LIFT / 255.0 - luma_offset),
+            128.0 * (1.0 - g) + shift(2, kb),
+            128.0 * (1.0 - g) + shift(0, kr),
+        ],
+    )
+}
+
+/// A grid row interpolated to every lane of a plane row: gains and offsets.
+struct FieldRow {
+    gain: Vec<f32>,
+    offset: Vec<f32>,
+}
+
+/// Two consecutive `FieldRow`s, kept while the plane rows they serve (about a
+/// cell's worth) go by. Row `r` lives in slot `r % 2`.
+struct FieldRows {
+    held: [Option<usize>; 2],
+    slots: [FieldRow; 2],
+}
+
+impl FieldRows {
+    fn new(lanes: usize) -> FieldRows {
+        let row = || FieldRow {
+            // Padding lanes keep a gain of 1 and an offset of 0.
+            gain: vec![1.0; lanes],
+            offset: vec![0.0; lanes],
+        };
+        FieldRows {
+            held: [None; 2],
+            slots: [row(), row()],
+        }
+    }
+
+    /// Rows `ly` and `ly + 1`, filling in with `fill` those not held.
+    fn at(&mut self, ly: usize, fill: impl Fn(usize, &mut FieldRow)) -> (&FieldRow, &FieldRow) {
+        for r in [ly, ly + 1] {
+            if self.held[r % 2] != Some(r) {
+                fill(r, &mut self.slots[r % 2]);
+                self.held[r % 2] = Some(r);
+            }
+        }
+        (&self.slots[ly % 2], &self.slots[(ly + 1) % 2])
+    }
+}
+
+/// Blends one row of lanes: the vertical half of the bilinear upsampling, then
+/// `g · v + o` dithered ([`dither`]) and rounded, in exactly the operations of
+/// [`GainField::at`] so the bytes do not change.
+pub(super) fn blend_row(
+    row: &mut [u8],
+    ty: f32,
+    top: (&[f32], &[f32]),
+    bottom: (&[f32], &[f32]),
+    dither: &[f32],
+) {
+    // AVX2, where the CPU has it, doubles the vectors' width. The results are
+    // the same, as both builds run the same IEEE operations in the same order
+    // (Rust never fuses a multiply and an add on its own).
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { blend_row_avx2(row, ty, top, bottom, dither) };
+    }
+    blend_row_portable(row, ty, top, bottom, dither)
+}
+
+/// `blend_row_portable` built for AVX2.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn blend_row_avx2(
+    row: &mut [u8],
+    ty: f32,
+    top: (&[f32], &[f32]),
+    bottom: (&[f32], &[f32]),
+    dither: &[f32],
+) {
+    blend_row_portable(row, ty, top, bottom, dither)
+}
+
+// Always inlined, so that `blend_row_avx2` holds a copy built for AVX2.
+#[inline(always)]
+pub(super) fn blend_row_portable(
+    row: &mut [u8],
+    ty: f32,
+    top: (&[f32], &[f32]),
+    bottom: (&[f32], &[f32]),
+    dither: &[f32],
+) {
+    let uy = 1.0 - ty;
+    // Equal lengths up front let the compiler drop the bounds checks.
+    let n = row.len();
+    let (top_gain, top_offset) = (&top.0[..n], &top.1[..n]);
+    let (bottom_gain, bottom_offset) = (&bottom.0[..n], &bottom.1[..n]);
+    let dither = &dither[..n];
+    for k in 0..n {
+        let gain = top_gain[k] * uy + bottom_gain[k] * ty;
+        let offset = top_offset[k] * uy + bottom_offset[k] * ty;
+        row[k] = round_to_u8(gain * row[k] as f32 + offset + dither[k]);
+    }
+}
+
+/// Side of the ordered dither's pattern.
+const DITHER: usize = 4;
+
+/// The 4 × 4 Bayer pattern: each value once, neighbours far apart.
+const BAYER: [u8; DITHER * DITHER] = [0, 8, 2, 10, 12, 4, 14, 6, 3, 11, 1, 9, 15, 7, 13, 5];
+
+/// What is added to a pasted value at plane pixel (x, y) before rounding, in
+/// (−0.5, 0.5): an ordered dither. A smooth change over a flat dark area
+/// otherwise rounds to bands, whose borders (a level at 4 is a change of a
+/// sixth) show where the field crosses each half level.
+pub(super) fn dither(x: usize, y: usize) -> f32 {
+    (BAYER[(y % DITHER) * DITHER + x % DITHER] as f32 + 0.5) / (DITHER * DITHER) as f32 - 0.5
+}
+
+/// Per row of the pattern, the dither of every lane of the `count` pixels
+/// from column `first` of a row, `lanes` a pixel.
+fn dither_rows(first: usize, count: usize, lanes: usize) -> [Vec<f32>; DITHER] {
+    std::array::from_fn(|y| {
+        (0..count * lanes)
+            .map(|lane| dither(first + lane / lanes, y))
+            .collect()
+    })
+}
