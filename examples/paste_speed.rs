@@ -1,6 +1,6 @@
 //! Times the crop (`sample_crop`) and the paste (`LightingChange::apply`) on
 //! synthetic frames, without GStreamer, as the element runs them: the default
-//! full-height crop, the 96 px network and a feather of 25% of the crop.
+//! full-height crop, the 96 px network and a feather of half the crop.
 //!
 //! ```text
 //! cargo run --release --example paste_speed -- [--rounds 41]
@@ -27,7 +27,7 @@ const FORMATS: [PixelFormat; 3] = [PixelFormat::I420, PixelFormat::Nv12, PixelFo
 /// The default network's resolution.
 const RES: usize = 96;
 /// The element's default feather, as a fraction of the crop.
-const FEATHER: f64 = 0.25;
+const FEATHER: f64 = 0.5;
 const MATRIX: YuvMatrix = YuvMatrix::BT709_LIMITED;
 
 /// A frame of `format` full of noise (xorshift32: cheap, deterministic, no dependency).

@@ -23,6 +23,7 @@ use lsydrelight_testkit::{
     flags::flag,
     init,
     quality::{BoxEdge, Region, box_edge, change_map, mean_level, mottling, pumping},
+    recording::ensure_recording,
     video::{FRAME, frame_time, rgb_caps, to_rgb},
 };
 
@@ -36,6 +37,43 @@ struct Measured {
     pumping: f64,
     /// Where the largest box edge is.
     worst: String,
+    /// Against the ground truth, where there is one: RMSE (0-255) of the output
+    /// over the relit square and over the whole frame, and the same for the input.
+    truth: Option<[f64; 4]>,
+}
+
+/// RMSE (0-255) of `a` against `b` over `region`, or over the whole frame.
+fn rmse(a: &RgbImage, b: &RgbImage, region: Option<Region>) -> f64 {
+    let (w, h) = (a.width, a.height);
+    let r = region.unwrap_or(Region {
+        x: 0,
+        y: 0,
+        size: w.max(h),
+    });
+    let (mut sum, mut count) = (0.0, 0usize);
+    for y in r.y..(r.y + r.size).min(h) {
+        let row = 3 * (y * w + r.x)..3 * (y * w + (r.x + r.size).min(w));
+        for (p, q) in a.data[row.clone()].iter().zip(&b.data[row]) {
+            sum += (*p as f64 - *q as f64).powi(2);
+            count += 1;
+        }
+    }
+    (sum / count.max(1) as f64).sqrt()
+}
+
+/// Up to `frames` frames of a Y4M file, as RGB.
+fn read_y4m(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
+    let mut reader =
+        deskstage::io::Y4mReader::open(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let mut out = Vec::new();
+    while out.len() < frames {
+        match reader.next_frame() {
+            Ok(Some(img)) => out.push(img),
+            Ok(None) => break,
+            Err(e) => return Err(format!("{}: {e}", path.display())),
+        }
+    }
+    Ok(out)
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -176,13 +214,12 @@ fn before_after(before: &RgbImage, after: &RgbImage) -> RgbImage {
 
 fn measure(
     name: &str,
-    path: &Path,
-    frames: usize,
+    input: Vec<RgbImage>,
+    truth: Option<Vec<RgbImage>>,
     model: &Path,
     target: &Path,
     out: &Path,
 ) -> Result<Measured, String> {
-    let input = decode(path, frames)?;
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
         relight(&input, model, target)?.into_iter().unzip();
     // The face measures look at the square the element relit.
@@ -222,6 +259,16 @@ fn measure(
         .zip(&regions)
         .map(|((i, o), &r)| (mean_level(i, r), mean_level(o, r)))
         .collect();
+    let truth = truth.map(|truth| {
+        let mean =
+            |f: &dyn Fn(usize) -> f64| (0..input.len()).map(f).sum::<f64>() / input.len() as f64;
+        [
+            mean(&|k| rmse(&output[k], &truth[k], Some(regions[k]))),
+            mean(&|k| rmse(&output[k], &truth[k], None)),
+            mean(&|k| rmse(&input[k], &truth[k], Some(regions[k]))),
+            mean(&|k| rmse(&input[k], &truth[k], None)),
+        ]
+    });
     let shown = input.len() / 2;
     let image = out.join(format!("{name}-before-after.png"));
     deskstage::io::write_png(&image, &before_after(&input[shown], &output[shown]))
@@ -231,6 +278,7 @@ fn measure(
         .map_err(|e| format!("{}: {e}", image.display()))?;
     Ok(Measured {
         worst,
+        truth,
         name: name.to_string(),
         frames: input.len(),
         box_edge_max: edges.iter().copied().fold(0.0, f64::max),
@@ -265,10 +313,40 @@ fn main() -> Result<(), String> {
                 path.display()
             ));
         }
-        let m = measure(name, &path, frames, &model, &target, &out)?;
+        let m = measure(name, decode(&path, frames)?, None, &model, &target, &out)?;
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
+        );
+        worst.push(format!("{}: largest box edge at {}", m.name, m.worst));
+    }
+    // The simulator's recordings of its default person, relit to their own
+    // sunset target, against their exact ground truth.
+    println!();
+    println!(
+        "| recording | frames | box edge max % | box edge median % | mottling median % | pumping (levels) | RMSE relit square | RMSE frame | input RMSE square | input RMSE frame |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    for (recording, length) in [("steady", 300), ("wander", 45)] {
+        let dir = root.join(format!("target/recordings/{recording}-{length}"));
+        ensure_recording(&dir, recording, length)?;
+        let input = read_y4m(&dir.join("face.y4m"), frames)?;
+        let truth = read_y4m(&dir.join("truth-sunset.y4m"), frames)?;
+        let target = dir.join("target-sunset.png");
+        let m = measure(recording, input, Some(truth), &model, &target, &out)?;
+        let t = m.truth.expect("a recording has its truth");
+        println!(
+            "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
+            m.name,
+            m.frames,
+            m.box_edge_max,
+            m.box_edge_median,
+            m.mottling_median,
+            m.pumping,
+            t[0],
+            t[1],
+            t[2],
+            t[3]
         );
         worst.push(format!("{}: largest box edge at {}", m.name, m.worst));
     }

@@ -520,11 +520,18 @@ pub struct LightingChange {
 impl LightingChange {
     /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res).
     pub fn new(input: &[f32], relit: &[f32], res: usize) -> LightingChange {
-        let n = res * res;
-        let relit = bound_invented_light(input, relit, n);
+        let relit = bound_invented_light(input, relit, res * res);
+        // The change is smooth over many network pixels: at half the
+        // resolution its blurs cost a quarter and lose nothing.
+        let (input, relit, res) = if res >= 64 && res % 2 == 0 {
+            (halve(input, res), halve(&relit, res), res / 2)
+        } else {
+            (input.to_vec(), relit, res)
+        };
+        let (input, relit, n) = (&input[..], &relit[..], res * res);
         LightingChange {
             res,
-            log_gain: smooth_log_gain(input, &relit, res),
+            log_gain: smooth_log_gain(input, relit, res),
             smooth_input: [0, 1, 2]
                 .map(|c| blur(&input[c * n..(c + 1) * n], res, SHADING_SMOOTHING)),
         }
@@ -567,6 +574,23 @@ impl LightingChange {
         let bottom = at(x, y1) + (at(x1, y1) - at(x, y1)) * tx;
         top + (bottom - top) * ty
     }
+}
+
+/// A planar image of 3 × res × res (res even) averaged over 2 × 2 pixels.
+fn halve(img: &[f32], res: usize) -> Vec<f32> {
+    let half = res / 2;
+    let mut out = Vec::with_capacity(3 * half * half);
+    for plane in img.chunks_exact(res * res) {
+        for y in 0..half {
+            let (top, bottom) = (&plane[2 * y * res..], &plane[(2 * y + 1) * res..]);
+            out.extend(
+                (0..half).map(|x| {
+                    (top[2 * x] + top[2 * x + 1] + bottom[2 * x] + bottom[2 * x + 1]) * 0.25
+                }),
+            );
+        }
+    }
+    out
 }
 
 /// The relit image with no pixel brighter than the input allows: at most
@@ -635,26 +659,32 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize) -> [Vec<f32>; 3] {
     // dark room) are the network's least certain and its largest, and would
     // otherwise spill over the face, which then clips where they do not.
     let weight: Vec<f32> = (0..n).map(|i| luma(input, n, i) + WEIGHT_FLOOR).collect();
-    let weighted_blur = |field: &[f32], fraction: f32| -> Vec<f32> {
+    // Normalised convolution: the blur of weight × field over the blur of the
+    // weight, the latter once per radius.
+    let blurred_weight = |fraction| (fraction, blur(&weight, res, fraction));
+    let weights = [
+        blurred_weight(BRIGHTNESS_SMOOTHING),
+        blurred_weight(SHADING_SMOOTHING),
+        blurred_weight(COLOUR_SMOOTHING),
+    ];
+    let weighted_blur = |field: &[f32], (fraction, blurred): &(f32, Vec<f32>)| -> Vec<f32> {
         let product: Vec<f32> = field.iter().zip(&weight).map(|(f, w)| f * w).collect();
-        blur(&product, res, fraction)
-            .iter()
-            .zip(blur(&weight, res, fraction))
-            .map(|(p, w)| p / w)
-            .collect()
+        let mut out = blur(&product, res, *fraction);
+        out.iter_mut().zip(blurred).for_each(|(p, w)| *p /= w);
+        out
     };
     let mean: Vec<f32> = (0..n)
         .map(|i| (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
         .collect();
-    let coarse = weighted_blur(&mean, BRIGHTNESS_SMOOTHING);
+    let coarse = weighted_blur(&mean, &weights[0]);
     let brightness: Vec<f32> = coarse
         .iter()
-        .zip(weighted_blur(&mean, SHADING_SMOOTHING))
+        .zip(weighted_blur(&mean, &weights[1]))
         .map(|(c, f)| c + (f - c).clamp(-SHADING_DETAIL, SHADING_DETAIL))
         .collect();
     gains.map(|g| {
         let colour: Vec<f32> = g.iter().zip(&mean).map(|(g, m)| g - m).collect();
-        weighted_blur(&colour, COLOUR_SMOOTHING)
+        weighted_blur(&colour, &weights[2])
             .iter()
             .zip(&brightness)
             .map(|(c, b)| c + b)
@@ -668,7 +698,12 @@ const WEIGHT_FLOOR: f32 = 0.02;
 
 /// A box blur of a res × res field, `radius` each way, shrinking at the borders.
 fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
-    let along = |src: &[f32], at: &dyn Fn(usize, usize) -> usize| {
+    fn along(
+        src: &[f32],
+        res: usize,
+        radius: usize,
+        at: impl Fn(usize, usize) -> usize,
+    ) -> Vec<f32> {
         let mut out = vec![0f32; src.len()];
         let mut prefix = vec![0f32; res + 1];
         for line in 0..res {
@@ -681,9 +716,9 @@ fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
             }
         }
         out
-    };
-    let rows = along(field, &|y, x| y * res + x);
-    along(&rows, &|x, y| y * res + x)
+    }
+    let rows = along(field, res, radius, |y, x| y * res + x);
+    along(&rows, res, radius, |x, y| y * res + x)
 }
 
 /// `x.round().clamp(0.0, 255.0) as u8` (NaN to 0 as there) in operations that

@@ -158,8 +158,7 @@ fn apply_channel(
     for (y, &ty) in taps_y.iter().enumerate() {
         for (x, &tx) in taps_x.iter().enumerate() {
             let at = y * stride + x * step + offset;
-            let (gain, shift) = field.at(channel, tx, ty);
-            let value = gain * data[at] as f32 + shift + dither(x, y);
+            let value = field.at(channel, data[at], tx, ty, dither(x, y));
             data[at] = value.round().clamp(0.0, 255.0) as u8;
         }
     }
