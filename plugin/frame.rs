@@ -523,7 +523,7 @@ impl LightingChange {
         let relit = bound_invented_light(input, relit, res * res);
         // The change is smooth over many network pixels: at half the
         // resolution its blurs cost a quarter and lose nothing.
-        let (input, relit, res) = if res >= 64 && res % 2 == 0 {
+        let (input, relit, res) = if res >= 64 && res.is_multiple_of(2) {
             (halve(input, res), halve(&relit, res), res / 2)
         } else {
             (input.to_vec(), relit, res)

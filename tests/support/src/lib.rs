@@ -10,6 +10,8 @@
 //!   against its exact ground truth;
 //! - [`quality`]: measures of the output that need no ground truth (box edges,
 //!   mottling, pumping), for real footage;
+//! - [`footage`]: real clips and the simulator's recordings decoded to RGB, and
+//!   relit by the element with no monitor stream, for those measures;
 //! - [`flow`]: classical optical flow, and TecoGAN's tOF built on it;
 //! - [`flags`]: the examples' command-line flags.
 //!
@@ -20,6 +22,7 @@ use std::path::{Path, PathBuf};
 pub mod element;
 pub mod flags;
 pub mod flow;
+pub mod footage;
 pub mod person;
 pub mod quality;
 pub mod recording;
