@@ -209,15 +209,29 @@ fn without_a_face_the_frame_passes_and_a_fading_face_is_shown_in_part() {
         1,
         "a lost face forgets the stream's state"
     );
-    // Half faded in: every byte moves at most about half as far as when fully shown.
+    // Half faded in: the change is shown at half its log gain, so every byte
+    // moves the same way as when fully shown and no farther, and on average
+    // about half as far.
     let mut full = policy(Skips::default());
     let shown = run(&mut full, face, white_monitor(), false).1.unwrap();
     let mut half = policy(Skips::default());
     let halfway = run_faded(&mut half, face, white_monitor(), false, 0.5)
         .1
         .unwrap();
+    let (mut full_total, mut half_total) = (0.0, 0.0);
     for ((s, h), i) in shown.iter().zip(&halfway).zip(&face.data) {
         let (full_step, half_step) = (*s as f32 - *i as f32, *h as f32 - *i as f32);
-        assert!((half_step - full_step / 2.0).abs() <= 1.0);
+        // A level either way for the dither and rounding.
+        assert!(
+            half_step.abs() <= full_step.abs() + 1.0,
+            "{half_step} {full_step}"
+        );
+        assert!(half_step * full_step >= -1.0, "{half_step} {full_step}");
+        (full_total, half_total) = (full_total + full_step.abs(), half_total + half_step.abs());
     }
+    let share = half_total / full_total;
+    assert!(
+        (0.35..0.65).contains(&share),
+        "half faded in moves {share} as far"
+    );
 }

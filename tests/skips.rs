@@ -233,13 +233,14 @@ fn late_frames_reuse_the_relighting_and_say_so() {
 }
 
 #[test]
-fn only_the_face_region_is_touched() {
+fn only_the_face_region_and_its_fade_are_touched() {
     let (w, ht) = (640u32, 480u32);
     let img = render_person(&State::default(), Vec3::new(1.0, 1.0, 1.0), w, ht);
     for format in [gst_video::VideoFormat::I420, gst_video::VideoFormat::Bgrx] {
         let e = element();
         e.set_property("face-tracking", false);
         e.set_property("crop-size", 0.5f64);
+        e.set_property("feather", 0.25f64);
         e.set_property("target-location", target("left-key"));
         let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
         let c = caps(format, w, ht, 30);
@@ -247,10 +248,14 @@ fn only_the_face_region_is_touched() {
         let input = buffer(&img, &c, gst::ClockTime::ZERO, FRAME);
         h.push(input.clone()).unwrap();
         let out = h.pull().unwrap();
-        // The crop is the centred 240 x 240 square; everything else is byte for byte the input.
+        // The crop is the centred 240 x 240 square. The change is whole within
+        // a circle a quarter of its side across (60 pixels) and fades out over
+        // a quarter of its side beyond: past 60 + 60 pixels from its centre,
+        // and the field's grid cell (15 pixels) of interpolation, everything
+        // is byte for byte the input.
         let (a, b) = (input.map_readable().unwrap(), out.map_readable().unwrap());
         let info = gst_video::VideoInfo::from_caps(&c).unwrap();
-        let (x0, y0, size) = (200usize, 120usize, 240usize);
+        let (cx, cy, reach) = (320.0f32, 240.0f32, 60.0 + 60.0 + 15.0);
         let stride = info.stride()[0] as usize;
         let bpp = if format == gst_video::VideoFormat::I420 {
             1
@@ -261,13 +266,13 @@ fn only_the_face_region_is_touched() {
         for y in 0..ht as usize {
             for x in 0..w as usize {
                 let i = y * stride + x * bpp;
-                let inside = (x0..x0 + size).contains(&x) && (y0..y0 + size).contains(&y);
-                if inside {
+                let distance = (x as f32 + 0.5 - cx).hypot(y as f32 + 0.5 - cy);
+                if distance <= 60.0 {
                     inside_changed += (a[i] != b[i]) as usize;
-                } else {
+                } else if distance > reach {
                     assert_eq!(
                         a[i], b[i],
-                        "{format:?}: pixel ({x}, {y}) outside the face region changed"
+                        "{format:?}: pixel ({x}, {y}) beyond the fade changed"
                     );
                 }
             }
