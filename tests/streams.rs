@@ -145,10 +145,10 @@ fn nan_from_the_model_is_never_shown() {
     };
     e.set_property("target-location", target("studio"));
     let good = push(&mut h, 0);
-    assert!(
-        mean_abs_diff(&to_rgb(&good, &c), face_rgb()) > 1.0,
-        "relit normally"
-    );
+    // Over the whole frame: 0.82 levels when written, the change being smooth
+    // and faded out round the face; a frame passed through moves by 0.
+    let relit = mean_abs_diff(&to_rgb(&good, &c), face_rgb());
+    assert!(relit > 0.5, "relit normally: {relit}");
 
     e.set_property("target-location", target("left-key"));
     for i in 1..4 {
