@@ -416,7 +416,7 @@ mod tests {
         };
         let mut t = FaceTracker::new(s);
         // Nobody for 3 frames, a face for 20, nobody again.
-        let out = run(&mut t, 0..43, |i| {
+        let out = run(&mut t, 0..60, |i| {
             if (3..23).contains(&i) {
                 vec![face(160.0, 100.0, 50.0)]
             } else {
@@ -437,7 +437,7 @@ mod tests {
         let gone = 23 + s.hold_frames as usize;
         assert!(fades[23..gone].iter().all(|&f| f == 1.0), "{fades:?}");
         assert!(fades[gone] < 1.0 && fades[gone + s.fade_frames as usize - 1] == 0.0);
-        assert_eq!(out[42].square, out[22].square);
+        assert_eq!(out[59].square, out[22].square);
         // A stream that starts on a face shows it at once: nothing to pop from.
         let mut fresh = FaceTracker::new(s);
         let first = run(&mut fresh, 0..1, |_| vec![face(160.0, 100.0, 50.0)]);
