@@ -250,6 +250,11 @@ impl FaceTracker {
         } else {
             (self.fade - step).max(target)
         };
+        // Steps of 1 / fade_frames do not add up to exactly 1 in floating point
+        // for every count (15 falls short): land on the target.
+        if (self.fade - target).abs() < step / 2.0 {
+            self.fade = target;
+        }
     }
 }
 
