@@ -2,10 +2,20 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
-//! cargo run --release --example benchmark -- --stages [--rounds 3] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! ```
 //!
+//! cargo run --release --example benchmark -- --reuse [--rounds 3] [--out results/benchmark]
+//! ```
+//!
+//! `--reuse` measures what the reuse interval buys where the network dominates:
+//! the element's own time a frame at 720p and 1080p (the recordings upscaled
+//! upstream of it) on `steady`, `slow` and `cuts` with `reuse-interval` 1, 3 and 6,
+//! in interleaved rounds, beside the face-region error of each interval at the
+//! recordings' own size against exact ground truth; writes `<out>/reuse.md`.
+//!
+//! ```text
 //! `--first-frame` times a live 720p pipeline from PLAYING to its first relit
 //! buffer: model load, ONNX Runtime sessions, the face detector, the first
 //! inference. The first start in a process also loads ONNX Runtime's library;
@@ -89,6 +99,21 @@ struct LatencyResult {
     paste_ms: f64,
     smoothing_ms: f64,
     monitor_light_ms: f64,
+    /// The rest, by stage (the element's `stats`): following the face, building
+    /// the lighting change, the policy's deciding, the element's setup and finish,
+    /// and the whole turn of a frame in the element up to handing it downstream.
+    #[serde(default)]
+    follow_ms: f64,
+    #[serde(default)]
+    change_ms: f64,
+    #[serde(default)]
+    decide_ms: f64,
+    #[serde(default)]
+    setup_ms: f64,
+    #[serde(default)]
+    finish_ms: f64,
+    #[serde(default)]
+    frame_ms: f64,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -321,6 +346,12 @@ fn latency(
         paste_ms: per_frame_ms("paste-seconds"),
         smoothing_ms: per_frame_ms("smoothing-seconds"),
         monitor_light_ms: per_frame_ms("monitor-light-seconds"),
+        follow_ms: per_frame_ms("face-seconds"),
+        change_ms: per_frame_ms("change-seconds"),
+        decide_ms: per_frame_ms("decide-seconds"),
+        setup_ms: per_frame_ms("setup-seconds"),
+        finish_ms: per_frame_ms("finish-seconds"),
+        frame_ms: per_frame_ms("frame-seconds"),
     })
 }
 
@@ -491,7 +522,7 @@ const MAXINE_720P_MS: [(&str, f64); 3] = [("T4", 54.0), ("A40", 17.1), ("L40", 8
 
 /// Where the time goes at each size and format, every frame through the network,
 /// in `rounds` interleaved rounds; a markdown table of medians and min-max.
-fn stages(rounds: usize) -> Result<String, String> {
+fn stages(rounds: usize, only: &[String]) -> Result<String, String> {
     let default = checkout().join("models/default");
     let every_frame = Variant {
         name: "default, every frame".into(),
@@ -505,6 +536,9 @@ fn stages(rounds: usize) -> Result<String, String> {
     let cases: Vec<((u32, u32), &str)> = [(854, 480), (1280, 720), (1920, 1080), (3840, 2160)]
         .into_iter()
         .flat_map(|size| ["I420", "NV12", "BGRx"].map(|format| (size, format)))
+        .filter(|&((w, h), format)| {
+            only.is_empty() || only.iter().any(|o| *o == format!("{w}x{h}/{format}"))
+        })
         .collect();
     let mut runs: Vec<Vec<LatencyResult>> = cases.iter().map(|_| Vec::new()).collect();
     for round in 0..rounds {
@@ -536,6 +570,19 @@ fn stages(rounds: usize) -> Result<String, String> {
             .into(),
         "|---|---|---|---|---|---|---|---|---|---|".into(),
     ];
+    let mut rest = vec![
+        String::new(),
+        "The rest, by stage (same runs, ms a frame): following the face (tracker, and \
+         the detector every 5th frame), building the lighting change, the temporal \
+         smoothing, the policy's deciding, the element's setup (lock, target, mapping \
+         the frame) and finish; outside: the frame's time in the element beyond these \
+         (its monitor frame's light, `monitor_src`, QoS)."
+            .into(),
+        String::new(),
+        "| input | format | rest | follow | change | smoothing | decide | setup | finish | outside |"
+            .into(),
+        "|---|---|---|---|---|---|---|---|---|---|".into(),
+    ];
     for (((w, h), format), results) in cases.iter().zip(&runs) {
         let col = |f: &dyn Fn(&LatencyResult) -> f64| spread(results.iter().map(f).collect());
         out.push(format!(
@@ -548,6 +595,159 @@ fn stages(rounds: usize) -> Result<String, String> {
             col(&|x| x.paste_ms),
             col(&|x| x.processing_ms - x.network_ms - x.crop_ms - x.paste_ms),
             col(&|x| x.fps),
+        ));
+        rest.push(format!(
+            "| {w}x{h} | {format} | {} | {} | {} | {} | {} | {} | {} | {} |",
+            col(&|x| x.processing_ms - x.network_ms - x.crop_ms - x.paste_ms),
+            col(&|x| x.follow_ms),
+            col(&|x| x.change_ms),
+            col(&|x| x.smoothing_ms),
+            col(&|x| x.decide_ms),
+            col(&|x| x.setup_ms),
+            col(&|x| x.finish_ms),
+            col(&|x| x.frame_ms - x.processing_ms),
+        ));
+    }
+    out.extend(rest);
+    Ok(out.join("\n") + "\n")
+}
+
+/// Recordings and intervals of `--reuse`.
+const REUSE_RECORDINGS: [&str; 3] = ["steady", "slow", "cuts"];
+const REUSE_INTERVALS: [u32; 3] = [1, 3, 6];
+
+/// The element's time on one recording upscaled to `w`×`h` I420: milliseconds a
+/// frame (its whole turn, `frame-seconds`) and its `stats`.
+fn element_time(
+    dir: &Path,
+    (w, h): (u32, u32),
+    interval: u32,
+) -> Result<(f64, gst::Structure), String> {
+    init();
+    let play = lsydrelight_testkit::recording::play_y4m;
+    let pipeline = gst::parse::launch(&format!(
+        "lsydrelight name=r ! fakesink sync=false \
+         {} ! videoscale ! videoconvert ! video/x-raw,format=I420,width={w},height={h} \
+         ! queue max-size-buffers=4 ! r.sink \
+         {} ! queue max-size-buffers=4 ! r.monitor_sink",
+        play(&dir.join("face.y4m")),
+        play(&dir.join("monitor.y4m")),
+    ))
+    .map_err(|e| e.to_string())?
+    .downcast::<gst::Pipeline>()
+    .map_err(|_| "not a pipeline")?;
+    let r = pipeline.by_name("r").ok_or("no element r")?;
+    r.set_property(
+        "target-location",
+        dir.join("target-sunset.png").to_str().unwrap(),
+    );
+    // The recordings' person, relit with their own model, as the error runs are.
+    r.set_property(
+        "model-location",
+        lsydrelight_testkit::default_model().to_str().unwrap(),
+    );
+    r.set_property("reuse-interval", interval);
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| e.to_string())?;
+    let msg = pipeline.bus().unwrap().timed_pop_filtered(
+        gst::ClockTime::from_seconds(600),
+        &[gst::MessageType::Eos, gst::MessageType::Error],
+    );
+    let stats = r.property::<gst::Structure>("stats");
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
+    match msg.as_ref().map(|m| m.view()) {
+        Some(gst::MessageView::Eos(_)) => {}
+        Some(gst::MessageView::Error(e)) => return Err(e.error().to_string()),
+        _ => return Err("the recording did not finish in 10 minutes".into()),
+    }
+    let frames = stats.get::<u64>("frames").unwrap_or(0).max(1) as f64;
+    let seconds = stats.get::<f64>("frame-seconds").unwrap_or(f64::NAN);
+    Ok((seconds * 1e3 / frames, stats))
+}
+
+/// What the reuse interval buys: a markdown table of the element's time a frame
+/// at 720p and 1080p (median and min-max of `rounds` interleaved rounds) and the
+/// speed-up against every frame through the network, beside the error at the
+/// recordings' own size.
+fn reuse(rounds: usize) -> Result<String, String> {
+    let sizes = [(1280u32, 720u32), (1920, 1080)];
+    let dirs: Vec<PathBuf> = REUSE_RECORDINGS
+        .iter()
+        .map(|name| recording_dir(name))
+        .collect::<Result<_, _>>()?;
+    let mut error = Vec::new();
+    for (name, dir) in REUSE_RECORDINGS.iter().zip(&dirs) {
+        for interval in REUSE_INTERVALS {
+            eprintln!("reuse: error {name}, interval {interval}");
+            let interval = interval.to_string();
+            let props = [("reuse-interval", interval.as_str())];
+            error.push(score_recording(dir, "sunset", true, &props, false)?);
+        }
+    }
+    let cases: Vec<(usize, (u32, u32), u32)> = sizes
+        .iter()
+        .flat_map(|&size| (0..dirs.len()).flat_map(move |d| REUSE_INTERVALS.map(|i| (d, size, i))))
+        .collect();
+    let mut times: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
+    let mut counts: Vec<(u64, u64, u64)> = vec![(0, 0, 0); cases.len()];
+    for round in 0..rounds {
+        for (k, &(d, size, interval)) in cases.iter().enumerate() {
+            eprintln!(
+                "reuse: round {} {} {}x{} interval {interval}",
+                round + 1,
+                REUSE_RECORDINGS[d],
+                size.0,
+                size.1
+            );
+            let (ms, stats) = element_time(&dirs[d], size, interval)?;
+            times[k].push(ms);
+            let stat = |f: &str| stats.get::<u64>(f).unwrap_or(0);
+            counts[k] = (stat("frames"), stat("relit"), stat("reused-interval"));
+        }
+    }
+    let median = |xs: &[f64]| {
+        let mut xs = xs.to_vec();
+        xs.sort_by(f64::total_cmp);
+        xs.get(xs.len() / 2).copied().unwrap_or(f64::NAN)
+    };
+    let mut out = vec![
+        format!(
+            "The element's own time a frame (its whole turn, `stats` frame-seconds), the \
+             recordings upscaled to I420 upstream of it, 2 threads; median (min-max) of \
+             {rounds} interleaved rounds; speed-up against every frame through the network \
+             (interval 1) on the same recording and size. Face-region RMSE and change RMSE \
+             on 0-255 at the recordings' own 480 x 360 against exact ground truth (sunset \
+             target), one run."
+        ),
+        String::new(),
+        "| recording | interval | size | ms a frame | speed-up | network runs | RMSE face region | change RMSE |"
+            .into(),
+        "|---|---|---|---|---|---|---|---|".into(),
+    ];
+    for (k, &(d, (w, h), interval)) in cases.iter().enumerate() {
+        let every = cases
+            .iter()
+            .position(|&(d1, s1, i1)| d1 == d && s1 == (w, h) && i1 == 1)
+            .expect("interval 1 is measured");
+        let xs = &times[k];
+        let (lo, hi) = xs
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        let e = &error[d * REUSE_INTERVALS.len()
+            + REUSE_INTERVALS.iter().position(|&i| i == interval).unwrap()];
+        let (frames, relit, _) = counts[k];
+        out.push(format!(
+            "| {} | {interval} | {w}x{h} | {:.2} ({lo:.2}-{hi:.2}) | {:.2}x | {relit}/{frames} | {:.3} | {:.3} |",
+            REUSE_RECORDINGS[d],
+            median(xs),
+            median(&times[every]) / median(xs),
+            e.rmse_region,
+            e.change_rmse,
         ));
     }
     Ok(out.join("\n") + "\n")
@@ -625,8 +825,21 @@ fn main() -> Result<(), String> {
     }
     if args.iter().any(|a| a == "--stages") {
         let rounds = flag("--rounds").map_or(Ok(3), |r| r.parse().map_err(|_| "bad --rounds"))?;
-        let table = stages(rounds)?;
+        // `--only 1280x720/I420,1920x1080/NV12`: those cases alone.
+        let only: Vec<String> = flag("--only")
+            .map(|o| o.split(',').map(str::to_string).collect())
+            .unwrap_or_default();
+        let table = stages(rounds, &only)?;
         let path = out.join("stages.md");
+        std::fs::write(&path, &table).map_err(|e| e.to_string())?;
+        print!("{table}");
+        eprintln!("wrote {}", path.display());
+        return Ok(());
+    }
+    if args.iter().any(|a| a == "--reuse") {
+        let rounds = flag("--rounds").map_or(Ok(3), |r| r.parse().map_err(|_| "bad --rounds"))?;
+        let table = reuse(rounds)?;
+        let path = out.join("reuse.md");
         std::fs::write(&path, &table).map_err(|e| e.to_string())?;
         print!("{table}");
         eprintln!("wrote {}", path.display());

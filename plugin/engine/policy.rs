@@ -212,13 +212,14 @@ pub struct PolicyCounts {
     pub filter_seconds: f64,
     /// Seconds reading the face region into the network's input.
     pub crop_seconds: f64,
+    /// Seconds building the lighting change to paste.
+    pub change_seconds: f64,
 }
 
 /// What a relit frame leaves for the frames that reuse it.
 struct Processed {
-    /// The network's input and output, and the averaged source light.
+    /// The network's input, and the averaged source light.
     image: Vec<f32>,
-    relit: Vec<f32>,
     average: Light,
     change: LightingChange,
     crop: Crop,
@@ -239,8 +240,6 @@ pub struct FramePolicy {
     /// The source light of the last frame that ran the network, before averaging.
     last_source: Option<Light>,
     last: Option<Processed>,
-    /// The last relighting as carried onto the current frame.
-    carried: Option<LightingChange>,
     counts: PolicyCounts,
 }
 
@@ -261,7 +260,6 @@ impl FramePolicy {
             target: None,
             last_source: None,
             last: None,
-            carried: None,
             counts: PolicyCounts::default(),
         }
     }
@@ -425,19 +423,12 @@ impl FramePolicy {
             self.skip_frame(&source);
             let last = self.last.as_mut().expect("reuse needs a relit frame");
             last.carried += 1;
-            // The last lighting change, carried onto this frame: what the network
-            // added to the last input, added to this one (for an unchanged input,
-            // exactly the last output).
-            let estimate: Vec<f32> = image
-                .iter()
-                .zip(&last.image)
-                .zip(&last.relit)
-                .map(|((now, then), relit)| relit + (now - then))
-                .collect();
-            let carried = LightingChange::new(&image, &estimate, res, frame.format, frame.matrix);
+            // The last lighting change, carried onto this frame as it is: a smooth
+            // gain of the frame's own pixels, so it follows the frame's detail and
+            // costs nothing to carry (building a new one costs more than the paste).
             return Ok(Outcome {
                 action: Action::Reused(why),
-                change: Some(self.carried.insert(carried)),
+                change: Some(&last.change),
                 strength,
                 predicted: last.predicted.clone(),
                 luma,
@@ -453,10 +444,11 @@ impl FramePolicy {
             });
         };
         self.counts.relit += 1;
-        let change = LightingChange::new(&image, &relit, res, frame.format, frame.matrix);
+        let change = timed(&mut self.counts.change_seconds, || {
+            LightingChange::new(&image, &relit, res, frame.format, frame.matrix)
+        });
         let last = self.last.insert(Processed {
             image,
-            relit,
             average: average.unwrap_or(out.source),
             change,
             crop,
