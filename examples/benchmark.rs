@@ -616,44 +616,108 @@ fn stages(rounds: usize, only: &[String]) -> Result<String, String> {
 const REUSE_RECORDINGS: [&str; 3] = ["steady", "slow", "cuts"];
 const REUSE_INTERVALS: [u32; 3] = [1, 3, 6];
 
-/// The element's time on one recording upscaled to `w`×`h` I420: milliseconds a
-/// frame (its whole turn, `frame-seconds`) and its `stats`.
-fn element_time(
-    dir: &Path,
-    (w, h): (u32, u32),
-    interval: u32,
-) -> Result<(f64, gst::Structure), String> {
+/// A video's frames decoded into memory, with their caps: what `--reuse` feeds the
+/// element, so nothing upstream competes with it for the cores while it is timed.
+struct Decoded {
+    caps: gst::Caps,
+    frames: Vec<gst::Buffer>,
+}
+
+/// `<dir>/<file>` decoded, scaled to `size` in I420 when given.
+fn decode(dir: &Path, file: &str, size: Option<(u32, u32)>) -> Result<Decoded, String> {
     init();
-    let play = lsydrelight_testkit::recording::play_y4m;
+    let scale = size.map_or(String::new(), |(w, h)| {
+        format!("! videoscale ! videoconvert ! video/x-raw,format=I420,width={w},height={h}")
+    });
     let pipeline = gst::parse::launch(&format!(
-        "lsydrelight name=r ! fakesink sync=false \
-         {} ! videoscale ! videoconvert ! video/x-raw,format=I420,width={w},height={h} \
-         ! queue max-size-buffers=4 ! r.sink \
-         {} ! queue max-size-buffers=4 ! r.monitor_sink",
-        play(&dir.join("face.y4m")),
-        play(&dir.join("monitor.y4m")),
+        "{} {scale} ! appsink name=frames sync=false",
+        lsydrelight_testkit::recording::play_y4m(&dir.join(file))
     ))
     .map_err(|e| e.to_string())?
     .downcast::<gst::Pipeline>()
     .map_err(|_| "not a pipeline")?;
-    let r = pipeline.by_name("r").ok_or("no element r")?;
-    r.set_property(
-        "target-location",
-        dir.join("target-sunset.png").to_str().unwrap(),
-    );
+    let sink = pipeline
+        .by_name("frames")
+        .and_then(|s| s.downcast::<gst_app::AppSink>().ok())
+        .ok_or("no appsink")?;
+    pipeline
+        .set_state(gst::State::Playing)
+        .map_err(|e| e.to_string())?;
+    let (mut caps, mut frames) = (None, Vec::new());
+    while let Ok(sample) = sink.pull_sample() {
+        caps = caps.or(sample.caps_owned());
+        frames.extend(sample.buffer_owned());
+    }
+    pipeline
+        .set_state(gst::State::Null)
+        .map_err(|e| e.to_string())?;
+    Ok(Decoded {
+        caps: caps.ok_or_else(|| format!("{file}: no frames"))?,
+        frames,
+    })
+}
+
+/// The element's time on decoded frames (a face stream and its monitor stream),
+/// pushed as fast as it takes them: milliseconds a frame of its whole turn
+/// (`frame-seconds`), frames a second through the pipeline, and its `stats`.
+fn element_time(
+    face: &Decoded,
+    monitor: &Decoded,
+    target: &Path,
+    interval: u32,
+) -> Result<(f64, f64, gst::Structure), String> {
+    let pipeline = gst::Pipeline::new();
+    let source = |d: &Decoded| {
+        gst_app::AppSrc::builder()
+            .caps(&d.caps)
+            .format(gst::Format::Time)
+            .block(true)
+            .max_buffers(4)
+            .build()
+    };
+    let (face_src, monitor_src) = (source(face), source(monitor));
+    let r = gst::ElementFactory::make("lsydrelight")
+        .build()
+        .map_err(|e| e.to_string())?;
+    r.set_property("target-location", target.to_str().unwrap());
     // The recordings' person, relit with their own model, as the error runs are.
     r.set_property(
         "model-location",
         lsydrelight_testkit::default_model().to_str().unwrap(),
     );
     r.set_property("reuse-interval", interval);
+    let sink = gst::ElementFactory::make("fakesink")
+        .property("sync", false)
+        .build()
+        .map_err(|e| e.to_string())?;
+    pipeline
+        .add_many([face_src.upcast_ref(), monitor_src.upcast_ref(), &r, &sink])
+        .map_err(|e| e.to_string())?;
+    gst::Element::link_many([face_src.upcast_ref(), &r, &sink]).map_err(|e| e.to_string())?;
+    monitor_src
+        .link_pads(None, &r, Some("monitor_sink"))
+        .map_err(|e| e.to_string())?;
     pipeline
         .set_state(gst::State::Playing)
         .map_err(|e| e.to_string())?;
+    let started = Instant::now();
+    std::thread::scope(|scope| {
+        for (src, d) in [(&face_src, face), (&monitor_src, monitor)] {
+            scope.spawn(move || {
+                for b in &d.frames {
+                    if src.push_buffer(b.clone()).is_err() {
+                        break;
+                    }
+                }
+                let _ = src.end_of_stream();
+            });
+        }
+    });
     let msg = pipeline.bus().unwrap().timed_pop_filtered(
         gst::ClockTime::from_seconds(600),
         &[gst::MessageType::Eos, gst::MessageType::Error],
     );
+    let elapsed = started.elapsed().as_secs_f64();
     let stats = r.property::<gst::Structure>("stats");
     pipeline
         .set_state(gst::State::Null)
@@ -665,13 +729,13 @@ fn element_time(
     }
     let frames = stats.get::<u64>("frames").unwrap_or(0).max(1) as f64;
     let seconds = stats.get::<f64>("frame-seconds").unwrap_or(f64::NAN);
-    Ok((seconds * 1e3 / frames, stats))
+    Ok((seconds * 1e3 / frames, frames / elapsed, stats))
 }
 
 /// What the reuse interval buys: a markdown table of the element's time a frame
-/// at 720p and 1080p (median and min-max of `rounds` interleaved rounds) and the
-/// speed-up against every frame through the network, beside the error at the
-/// recordings' own size.
+/// at 720p and 1080p (median and min-max of `rounds` rounds, the intervals
+/// interleaved within each) and the speed-up against every frame through the
+/// network, beside the error at the recordings' own size.
 fn reuse(rounds: usize) -> Result<String, String> {
     let sizes = [(1280u32, 720u32), (1920, 1080)];
     let dirs: Vec<PathBuf> = REUSE_RECORDINGS
@@ -687,69 +751,69 @@ fn reuse(rounds: usize) -> Result<String, String> {
             error.push(score_recording(dir, "sunset", true, &props, false)?);
         }
     }
-    let cases: Vec<(usize, (u32, u32), u32)> = sizes
-        .iter()
-        .flat_map(|&size| (0..dirs.len()).flat_map(move |d| REUSE_INTERVALS.map(|i| (d, size, i))))
-        .collect();
-    let mut times: Vec<Vec<f64>> = vec![Vec::new(); cases.len()];
-    let mut counts: Vec<(u64, u64, u64)> = vec![(0, 0, 0); cases.len()];
-    for round in 0..rounds {
-        for (k, &(d, size, interval)) in cases.iter().enumerate() {
-            eprintln!(
-                "reuse: round {} {} {}x{} interval {interval}",
-                round + 1,
-                REUSE_RECORDINGS[d],
-                size.0,
-                size.1
-            );
-            let (ms, stats) = element_time(&dirs[d], size, interval)?;
-            times[k].push(ms);
-            let stat = |f: &str| stats.get::<u64>(f).unwrap_or(0);
-            counts[k] = (stat("frames"), stat("relit"), stat("reused-interval"));
-        }
-    }
     let median = |xs: &[f64]| {
         let mut xs = xs.to_vec();
         xs.sort_by(f64::total_cmp);
         xs.get(xs.len() / 2).copied().unwrap_or(f64::NAN)
     };
+    let spread = |xs: &[f64]| {
+        let lo = xs.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        format!("{:.2} ({lo:.2}-{hi:.2})", median(xs))
+    };
+    let mut rows = Vec::new();
+    for &(w, h) in &sizes {
+        for (d, dir) in dirs.iter().enumerate() {
+            let name = REUSE_RECORDINGS[d];
+            eprintln!("reuse: decoding {name} at {w}x{h}");
+            let face = decode(dir, "face.y4m", Some((w, h)))?;
+            let monitor = decode(dir, "monitor.y4m", None)?;
+            let target = dir.join("target-sunset.png");
+            let mut times = vec![(Vec::new(), Vec::new(), 0u64, 0u64); REUSE_INTERVALS.len()];
+            for round in 0..rounds {
+                for (k, &interval) in REUSE_INTERVALS.iter().enumerate() {
+                    eprintln!(
+                        "reuse: round {} {name} {w}x{h} interval {interval}",
+                        round + 1
+                    );
+                    let (ms, fps, stats) = element_time(&face, &monitor, &target, interval)?;
+                    let stat = |f: &str| stats.get::<u64>(f).unwrap_or(0);
+                    times[k].0.push(ms);
+                    times[k].1.push(fps);
+                    times[k].2 = stat("frames");
+                    times[k].3 = stat("relit");
+                }
+            }
+            for (k, &interval) in REUSE_INTERVALS.iter().enumerate() {
+                let (ms, fps, frames, relit) = &times[k];
+                let e = &error[d * REUSE_INTERVALS.len() + k];
+                rows.push(format!(
+                    "| {name} | {interval} | {w}x{h} | {} | {:.2}x | {} | {relit}/{frames} | {:.3} | {:.3} |",
+                    spread(ms),
+                    median(&times[0].0) / median(ms),
+                    spread(fps),
+                    e.rmse_region,
+                    e.change_rmse,
+                ));
+            }
+        }
+    }
     let mut out = vec![
         format!(
-            "The element's own time a frame (its whole turn, `stats` frame-seconds), the \
-             recordings upscaled to I420 upstream of it, 2 threads; median (min-max) of \
-             {rounds} interleaved rounds; speed-up against every frame through the network \
-             (interval 1) on the same recording and size. Face-region RMSE and change RMSE \
-             on 0-255 at the recordings' own 480 x 360 against exact ground truth (sunset \
+            "The element's own time a frame (its whole turn, `stats` frame-seconds) and frames \
+             a second through appsrc ! lsydrelight ! fakesink, the recordings decoded and \
+             upscaled to I420 beforehand, 2 threads; median (min-max) of {rounds} rounds, the \
+             intervals interleaved; speed-up in ms a frame against every frame through the \
+             network (interval 1) on the same recording and size. Face-region RMSE and change \
+             RMSE on 0-255 at the recordings' own 480 x 360 against exact ground truth (sunset \
              target), one run."
         ),
         String::new(),
-        "| recording | interval | size | ms a frame | speed-up | network runs | RMSE face region | change RMSE |"
+        "| recording | interval | size | ms a frame | speed-up | fps | network runs | RMSE face region | change RMSE |"
             .into(),
-        "|---|---|---|---|---|---|---|---|".into(),
+        "|---|---|---|---|---|---|---|---|---|".into(),
     ];
-    for (k, &(d, (w, h), interval)) in cases.iter().enumerate() {
-        let every = cases
-            .iter()
-            .position(|&(d1, s1, i1)| d1 == d && s1 == (w, h) && i1 == 1)
-            .expect("interval 1 is measured");
-        let xs = &times[k];
-        let (lo, hi) = xs
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-                (a.min(x), b.max(x))
-            });
-        let e = &error[d * REUSE_INTERVALS.len()
-            + REUSE_INTERVALS.iter().position(|&i| i == interval).unwrap()];
-        let (frames, relit, _) = counts[k];
-        out.push(format!(
-            "| {} | {interval} | {w}x{h} | {:.2} ({lo:.2}-{hi:.2}) | {:.2}x | {relit}/{frames} | {:.3} | {:.3} |",
-            REUSE_RECORDINGS[d],
-            median(xs),
-            median(&times[every]) / median(xs),
-            e.rmse_region,
-            e.change_rmse,
-        ));
-    }
+    out.extend(rows);
     Ok(out.join("\n") + "\n")
 }
 

@@ -205,6 +205,8 @@ pub struct PolicyCounts {
     /// Resets that forgot something.
     pub resets: u64,
     pub target_encodes: u64,
+    /// Codes computed for the averaged source light: one per change of it.
+    pub source_encodes: u64,
     pub predictions: u64,
     /// Seconds inside ONNX Runtime, every stage.
     pub network_seconds: f64,
@@ -239,6 +241,8 @@ pub struct FramePolicy {
     target: Option<(Light, Vec<f32>)>,
     /// The source light of the last frame that ran the network, before averaging.
     last_source: Option<Light>,
+    /// The last averaged source light and its code.
+    source_code: Option<(Light, Vec<f32>)>,
     last: Option<Processed>,
     counts: PolicyCounts,
 }
@@ -259,6 +263,7 @@ impl FramePolicy {
             predictions: PredictionSmoother::new(temporal.prediction_weight),
             target: None,
             last_source: None,
+            source_code: None,
             last: None,
             counts: PolicyCounts::default(),
         }
@@ -504,7 +509,15 @@ impl FramePolicy {
         let averaged = timed(&mut self.counts.filter_seconds, || {
             self.averager.push(this_source)
         });
-        let source_code = self.relighter.encode_light(&averaged)?;
+        let source_code = match &self.source_code {
+            // A still screen gives the same averaged light frame after frame.
+            Some((light, code)) if *light == averaged => code.clone(),
+            _ => {
+                let code = self.relighter.encode_light(&averaged)?;
+                self.counts.source_encodes += 1;
+                self.source_code.insert((averaged.clone(), code)).1.clone()
+            }
+        };
         let (smoother, filter_seconds) = (&mut self.smoother, &mut self.counts.filter_seconds);
         let relit = self
             .relighter

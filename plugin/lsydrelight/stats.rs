@@ -115,6 +115,7 @@ impl Stats {
             .field("monitor-out", self.monitor_out)
             .field("monitor-dropped", self.monitor_dropped)
             .field("target-encodes", p.target_encodes)
+            .field("source-encodes", p.source_encodes)
             .field("target-seconds", self.target_seconds)
             .field("target-stream-frames", self.target_stream_frames)
             .field("target-stream-decoded", self.target_stream_decoded)
