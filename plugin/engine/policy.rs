@@ -208,7 +208,8 @@ pub struct PolicyCounts {
     /// Codes computed for the averaged source light: one per change of it.
     pub source_encodes: u64,
     pub predictions: u64,
-    /// Seconds inside ONNX Runtime, every stage.
+    /// Seconds inside ONNX Runtime for frames, every stage; not encoding targets,
+    /// which happens outside the frames' turn (at start) or in the element's setup.
     pub network_seconds: f64,
     /// Seconds averaging source lights and smoothing features.
     pub filter_seconds: f64,
@@ -243,6 +244,8 @@ pub struct FramePolicy {
     last_source: Option<Light>,
     /// The last averaged source light and its code.
     source_code: Option<(Light, Vec<f32>)>,
+    /// Seconds in ONNX Runtime encoding target lights.
+    target_network_seconds: f64,
     last: Option<Processed>,
     counts: PolicyCounts,
 }
@@ -264,6 +267,7 @@ impl FramePolicy {
             target: None,
             last_source: None,
             source_code: None,
+            target_network_seconds: 0.0,
             last: None,
             counts: PolicyCounts::default(),
         }
@@ -275,7 +279,7 @@ impl FramePolicy {
 
     pub fn counts(&self) -> PolicyCounts {
         PolicyCounts {
-            network_seconds: self.relighter.time().seconds,
+            network_seconds: self.relighter.time().seconds - self.target_network_seconds,
             ..self.counts
         }
     }
@@ -321,7 +325,10 @@ impl FramePolicy {
         if self.target().is_some_and(|l| l == light) {
             return Ok(());
         }
-        let code = self.relighter.encode_light(light)?;
+        let before = self.relighter.time().seconds;
+        let code = self.relighter.encode_light(light);
+        self.target_network_seconds += self.relighter.time().seconds - before;
+        let code = code?;
         self.counts.target_encodes += 1;
         self.target = Some((light.clone(), code));
         self.last = None;
