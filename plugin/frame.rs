@@ -99,6 +99,22 @@ impl PixelFormat {
         (cbcr[0], cbcr[1])
     }
 
+    /// Where [`PixelFormat::chroma_at`] reads Cb and Cr: per channel its plane,
+    /// the subsampling, the bytes a plane pixel and the byte within it; for code
+    /// that reads many pixels and works out their offsets once.
+    pub(crate) fn chroma_lanes(self) -> [(usize, usize, usize, usize); 2] {
+        assert!(self.is_yuv(), "{self:?} has no chroma");
+        let mut lanes = [(0, 1, 1, 0); 2];
+        for pass in &self.passes()[1..] {
+            for (b, lane) in pass.lanes.iter().enumerate() {
+                if let Some(c) = *lane {
+                    lanes[c - 1] = (pass.plane, pass.subsample, pass.lanes.len(), b);
+                }
+            }
+        }
+        lanes
+    }
+
     pub fn is_yuv(self) -> bool {
         self.packed().is_none()
     }

@@ -535,3 +535,54 @@ fn an_off_centre_face_is_followed_and_an_empty_frame_passes() {
     assert_eq!(stat(&e2, "skipped-no-face"), 1);
     assert_eq!(stat(&e2, "relit"), 0);
 }
+
+/// `stats` names where a frame's time goes: every stage is counted once, within
+/// the element's processing, which is within the frame's whole turn.
+#[test]
+fn stats_account_for_the_time_stage_by_stage() {
+    let (e, mut h) = face_harness(gst_video::VideoFormat::I420);
+    let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 30);
+    for i in 0..6 {
+        h.push(buffer(face_rgb(), &c, frame_time(i), FRAME))
+            .unwrap();
+        h.pull().unwrap();
+    }
+    let stats = e.property::<gst::Structure>("stats");
+    let seconds = |field: &str| {
+        let s = stats
+            .get::<f64>(field)
+            .unwrap_or_else(|_| panic!("stats has no {field}"));
+        assert!(s >= 0.0, "{field} is {s}");
+        s
+    };
+    let stages = [
+        "face-seconds",
+        "crop-seconds",
+        "network-seconds",
+        "smoothing-seconds",
+        "change-seconds",
+        "decide-seconds",
+        "paste-seconds",
+        "setup-seconds",
+        "finish-seconds",
+    ];
+    let named: f64 = stages.iter().map(|s| seconds(s)).sum();
+    let processing = seconds("processing-seconds");
+    assert!(
+        named <= processing * 1.001,
+        "the stages add up to {named} s, more than the {processing} s of processing"
+    );
+    assert!(processing <= seconds("frame-seconds"));
+    for busy in [
+        "network-seconds",
+        "change-seconds",
+        "paste-seconds",
+        "crop-seconds",
+    ] {
+        assert!(seconds(busy) > 0.0, "{busy} counted nothing");
+    }
+    // Same picture, same light: the network ran every 3rd frame, and the frames
+    // between carried its change without building another.
+    assert_eq!(stat(&e, "relit"), 2);
+    assert_eq!(stat(&e, "reused-interval"), 4);
+}

@@ -197,6 +197,29 @@ fn the_network_runs_every_reuse_interval_frames_and_at_once_on_a_change() {
 }
 
 #[test]
+fn a_still_screen_encodes_its_light_once_it_has_settled() {
+    let mut p = policy(Skips {
+        reuse_interval: 1,
+        ..Skips::default()
+    });
+    let face = face_rgb();
+    let encodes = |p: &mut FramePolicy, source: &Source, frames: usize| {
+        for _ in 0..frames {
+            assert_eq!(run(p, face, source.clone(), false).0, Action::Relit);
+        }
+        p.counts().source_encodes
+    };
+    // The averaged light settles within the averaging window; from then on the
+    // same screen gives the same light, whose code is reused.
+    let settled = encodes(&mut p, &white_monitor(), 4);
+    assert!(settled >= 1);
+    assert_eq!(encodes(&mut p, &white_monitor(), 4), settled);
+    // Another screen is encoded afresh.
+    let blue = Source::Known(Light::uniform([0.1, 0.1, 0.9]));
+    assert!(encodes(&mut p, &blue, 1) > settled);
+}
+
+#[test]
 fn without_a_face_the_frame_passes_and_a_fading_face_is_shown_in_part() {
     let mut p = policy(Skips::default());
     let face = face_rgb();

@@ -40,6 +40,11 @@ impl Partial {
         &self.temp
     }
 
+    /// The final name.
+    pub fn dest(&self) -> &Path {
+        &self.dest
+    }
+
     /// Moves the finished file to its final name.
     pub fn commit(self) -> Result<(), Failure> {
         std::fs::rename(&self.temp, &self.dest).map_err(|e| {

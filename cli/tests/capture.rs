@@ -211,6 +211,67 @@ fn a_frozen_pose_is_warned_about() {
     );
 }
 
+/// The shipped call's screen content: what a person sees in a video call.
+fn call_file(name: &str) -> String {
+    let call = Path::new(env!("CARGO_MANIFEST_DIR")).join("../examples/data/call");
+    format!(
+        "filesrc location=\"{}\" ! decodebin",
+        call.join(name).display()
+    )
+}
+
+#[test]
+fn holding_still_while_the_screen_changes_gives_pairable_frames() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("me");
+    let o = run({
+        let mut c = Command::new(env!("CARGO_BIN_EXE_lsydrelight"));
+        c.args(["capture", "--out"]).arg(&out).args([
+            "--seconds",
+            "4",
+            "--screen",
+            &call_file("monitor.mp4"),
+            "--camera",
+            "screen. ! queue ! deskstagecam subject=201 motion=frozen width=320 height=240 fps=6",
+        ]);
+        c
+    });
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let g = &json(&out.join("session-000/session.json"))["guidance"];
+    let (usable, pairable) = (
+        g["usable_frames"].as_u64().unwrap(),
+        g["pairable_frames"].as_u64().unwrap(),
+    );
+    assert!(usable >= 20 && pairable * 2 >= usable, "{g}");
+}
+
+/// A webcam video and a screen recording made by other tools, started together,
+/// become a session by naming the files as the sources.
+#[test]
+fn recordings_made_elsewhere_are_captured_from_their_files() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("me");
+    let o = run({
+        let mut c = Command::new(env!("CARGO_BIN_EXE_lsydrelight"));
+        c.args(["capture", "--out"]).arg(&out).args([
+            "--camera",
+            &call_file("face.mp4"),
+            "--screen",
+            &call_file("monitor.mp4"),
+        ]);
+        c
+    });
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let s = json(&out.join("session-000/session.json"));
+    // The shipped call: 10 s at 30 fps, the person away for a second of it.
+    assert_eq!(s["camera_frames"], 300);
+    assert_eq!(s["light_frames"], 300);
+    let usable = s["guidance"]["usable_frames"].as_u64().unwrap();
+    assert!((255..=275).contains(&usable), "{usable}");
+    let (times, size) = decode(&out.join("session-000/camera.mkv"));
+    assert_eq!((times.len(), size), (300, (480, 360)));
+}
+
 #[test]
 fn a_face_that_leaves_is_warned_about() {
     let dir = tempfile::tempdir().unwrap();

@@ -108,6 +108,33 @@ fn mp4_with_screen_relights_video_and_keeps_audio_bit_identical() {
     assert!(partials(dir.path()).is_empty());
 }
 
+/// A video in which no face is ever found: relit (passed through), and no
+/// predicted-monitor file, since it would have no frames and not play.
+#[test]
+fn no_face_anywhere_writes_no_predicted_monitor_and_says_so() {
+    let f = fixtures();
+    let dir = tempfile::tempdir().unwrap();
+    let (out, predicted) = (dir.path().join("relit.mp4"), dir.path().join("monitor.mp4"));
+    // The screen recording: abstract monitor content, nobody in it.
+    let o = run(relight!(
+        "--face",
+        f.screen_mp4,
+        "--predicted-monitor",
+        predicted,
+        "--out",
+        out,
+    ));
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert_eq!(media::decode_video(&out).0, FRAMES);
+    assert!(!predicted.exists());
+    assert!(
+        stderr(&o).contains("no face was found in any frame"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(partials(dir.path()).is_empty());
+}
+
 #[test]
 fn mkv_keeps_opus_audio_bit_identical() {
     let f = fixtures();

@@ -205,20 +205,24 @@ pub struct PolicyCounts {
     /// Resets that forgot something.
     pub resets: u64,
     pub target_encodes: u64,
+    /// Codes computed for the averaged source light: one per change of it.
+    pub source_encodes: u64,
     pub predictions: u64,
-    /// Seconds inside ONNX Runtime, every stage.
+    /// Seconds inside ONNX Runtime for frames, every stage; not encoding targets,
+    /// which happens outside the frames' turn (at start) or in the element's setup.
     pub network_seconds: f64,
     /// Seconds averaging source lights and smoothing features.
     pub filter_seconds: f64,
     /// Seconds reading the face region into the network's input.
     pub crop_seconds: f64,
+    /// Seconds building the lighting change to paste.
+    pub change_seconds: f64,
 }
 
 /// What a relit frame leaves for the frames that reuse it.
 struct Processed {
-    /// The network's input and output, and the averaged source light.
+    /// The network's input, and the averaged source light.
     image: Vec<f32>,
-    relit: Vec<f32>,
     average: Light,
     change: LightingChange,
     crop: Crop,
@@ -238,9 +242,11 @@ pub struct FramePolicy {
     target: Option<(Light, Vec<f32>)>,
     /// The source light of the last frame that ran the network, before averaging.
     last_source: Option<Light>,
+    /// The last averaged source light and its code.
+    source_code: Option<(Light, Vec<f32>)>,
+    /// Seconds in ONNX Runtime encoding target lights.
+    target_network_seconds: f64,
     last: Option<Processed>,
-    /// The last relighting as carried onto the current frame.
-    carried: Option<LightingChange>,
     counts: PolicyCounts,
 }
 
@@ -260,8 +266,9 @@ impl FramePolicy {
             predictions: PredictionSmoother::new(temporal.prediction_weight),
             target: None,
             last_source: None,
+            source_code: None,
+            target_network_seconds: 0.0,
             last: None,
-            carried: None,
             counts: PolicyCounts::default(),
         }
     }
@@ -272,7 +279,7 @@ impl FramePolicy {
 
     pub fn counts(&self) -> PolicyCounts {
         PolicyCounts {
-            network_seconds: self.relighter.time().seconds,
+            network_seconds: self.relighter.time().seconds - self.target_network_seconds,
             ..self.counts
         }
     }
@@ -318,7 +325,10 @@ impl FramePolicy {
         if self.target().is_some_and(|l| l == light) {
             return Ok(());
         }
-        let code = self.relighter.encode_light(light)?;
+        let before = self.relighter.time().seconds;
+        let code = self.relighter.encode_light(light);
+        self.target_network_seconds += self.relighter.time().seconds - before;
+        let code = code?;
         self.counts.target_encodes += 1;
         self.target = Some((light.clone(), code));
         self.last = None;
@@ -425,19 +435,12 @@ impl FramePolicy {
             self.skip_frame(&source);
             let last = self.last.as_mut().expect("reuse needs a relit frame");
             last.carried += 1;
-            // The last lighting change, carried onto this frame: what the network
-            // added to the last input, added to this one (for an unchanged input,
-            // exactly the last output).
-            let estimate: Vec<f32> = image
-                .iter()
-                .zip(&last.image)
-                .zip(&last.relit)
-                .map(|((now, then), relit)| relit + (now - then))
-                .collect();
-            let carried = LightingChange::new(&image, &estimate, res);
+            // The last lighting change, carried onto this frame as it is: a smooth
+            // gain of the frame's own pixels, so it follows the frame's detail and
+            // costs nothing to carry (building a new one costs more than the paste).
             return Ok(Outcome {
                 action: Action::Reused(why),
-                change: Some(self.carried.insert(carried)),
+                change: Some(&last.change),
                 strength,
                 predicted: last.predicted.clone(),
                 luma,
@@ -453,10 +456,11 @@ impl FramePolicy {
             });
         };
         self.counts.relit += 1;
-        let change = LightingChange::new(&image, &relit, res);
+        let change = timed(&mut self.counts.change_seconds, || {
+            LightingChange::new(&image, &relit, res)
+        });
         let last = self.last.insert(Processed {
             image,
-            relit,
             average: average.unwrap_or(out.source),
             change,
             crop,
@@ -512,7 +516,15 @@ impl FramePolicy {
         let averaged = timed(&mut self.counts.filter_seconds, || {
             self.averager.push(this_source)
         });
-        let source_code = self.relighter.encode_light(&averaged)?;
+        let source_code = match &self.source_code {
+            // A still screen gives the same averaged light frame after frame.
+            Some((light, code)) if *light == averaged => code.clone(),
+            _ => {
+                let code = self.relighter.encode_light(&averaged)?;
+                self.counts.source_encodes += 1;
+                self.source_code.insert((averaged.clone(), code)).1.clone()
+            }
+        };
         let (smoother, filter_seconds) = (&mut self.smoother, &mut self.counts.filter_seconds);
         let relit = self
             .relighter

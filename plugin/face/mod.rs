@@ -163,16 +163,35 @@ pub fn sample_square(frame: &Frame, square: Square, res: usize) -> Vec<[f32; 3]>
     let xs = positions(square.cx - square.side / 2.0, frame.width);
     let ys = positions(square.cy - square.side / 2.0, frame.height);
     let planes = &frame.planes;
+    // Byte offsets are worked out once per sample column and row, not per sample.
     let (means, covered) = match frame.format.packed() {
-        Some((offsets, bpp)) => average(&xs, &ys, n, |x, y| {
-            let at = y * planes[0].stride + x * bpp;
-            offsets.map(|o| planes[0].data[at + o] as f32 / 255.0)
-        }),
+        Some((offsets, bpp)) => {
+            let data = planes[0].data;
+            let cols = offsets_of(&xs, |x| x * bpp);
+            let rows = offsets_of(&ys, |y| y * planes[0].stride);
+            average(&cols, &rows, n, |&row, &col| {
+                offsets.map(|o| data[row + col + o] as f32 / 255.0)
+            })
+        }
         None => {
-            let (yuv, covered) = average(&xs, &ys, n, |x, y| {
-                let (cb, cr) = frame.format.chroma_at(planes, x, y);
-                let luma = planes[0].data[y * planes[0].stride + x];
-                [luma as f32, cb as f32, cr as f32]
+            let [cb, cr] = frame.format.chroma_lanes();
+            let chroma_col = |(_, sub, bpp, byte): (usize, usize, usize, usize), x: usize| {
+                (x / sub) * bpp + byte
+            };
+            let chroma_row = |(plane, sub, _, _): (usize, usize, usize, usize), y: usize| {
+                (y / sub) * planes[plane].stride
+            };
+            let cols = offsets_of(&xs, |x| [x, chroma_col(cb, x), chroma_col(cr, x)]);
+            let rows = offsets_of(&ys, |y| {
+                [y * planes[0].stride, chroma_row(cb, y), chroma_row(cr, y)]
+            });
+            let (luma, cb_data, cr_data) = (planes[0].data, planes[cb.0].data, planes[cr.0].data);
+            let (yuv, covered) = average(&cols, &rows, n, |row, col| {
+                [
+                    luma[row[0] + col[0]] as f32,
+                    cb_data[row[1] + col[1]] as f32,
+                    cr_data[row[2] + col[2]] as f32,
+                ]
             });
             // Averaged before converting: the conversion is affine.
             let rgb = yuv.iter().map(|v| frame.matrix.to_rgb(v[0], v[1], v[2]));
@@ -187,23 +206,29 @@ pub fn sample_square(frame: &Frame, square: Square, res: usize) -> Vec<[f32; 3]>
         .collect()
 }
 
+/// Per sample position (None outside the frame), what reading it needs.
+fn offsets_of<T>(positions: &[Option<usize>], offset: impl Fn(usize) -> T) -> Vec<Option<T>> {
+    positions.iter().map(|p| p.map(&offset)).collect()
+}
+
 /// Per output pixel: the mean of `read` over its n × n samples inside the frame,
-/// and the share of its samples inside the frame.
-fn average(
-    xs: &[Option<usize>],
-    ys: &[Option<usize>],
+/// and the share of its samples inside the frame. `cols` and `rows` hold what
+/// reading a sample column and row needs, None outside the frame.
+fn average<C, R>(
+    cols: &[Option<C>],
+    rows: &[Option<R>],
     n: usize,
-    read: impl Fn(usize, usize) -> [f32; 3],
+    read: impl Fn(&R, &C) -> [f32; 3],
 ) -> (Vec<[f32; 3]>, Vec<f32>) {
-    let pixels = (xs.len() / n) * (ys.len() / n);
+    let pixels = (cols.len() / n) * (rows.len() / n);
     let (mut means, mut covered) = (Vec::with_capacity(pixels), Vec::with_capacity(pixels));
-    for row in ys.chunks_exact(n) {
-        for col in xs.chunks_exact(n) {
+    for row in rows.chunks_exact(n) {
+        for col in cols.chunks_exact(n) {
             let mut sum = [0f32; 3];
             let mut inside = 0;
-            for &y in row.iter().flatten() {
-                for &x in col.iter().flatten() {
-                    let v = read(x, y);
+            for y in row.iter().flatten() {
+                for x in col.iter().flatten() {
+                    let v = read(y, x);
                     sum = [sum[0] + v[0], sum[1] + v[1], sum[2] + v[2]];
                     inside += 1;
                 }
@@ -231,7 +256,7 @@ pub(crate) fn face(cx: f32, cy: f32, size: f32) -> FaceBox {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{Frame, PixelFormat, Plane, YuvMatrix};
+    use crate::frame::{Frame, OwnedFrame, PixelFormat, Plane, YuvMatrix};
 
     #[test]
     fn a_square_is_moved_into_the_frame_and_no_larger_than_it() {
@@ -332,6 +357,102 @@ mod tests {
                         frame.format
                     );
                 }
+            }
+        }
+    }
+
+    /// `sample_square` as it read each sample before its offsets were worked
+    /// out once a column and row: pixel by pixel, chroma through `chroma_at`.
+    fn sample_square_per_pixel(frame: &Frame, square: Square, res: usize) -> Vec<[f32; 3]> {
+        let scale = square.side / res as f32;
+        let n = (scale.ceil() as usize).clamp(1, 4);
+        let at = |start: f32, k: usize, extent: usize| {
+            let p = start + (k as f32 + 0.5) * scale / n as f32;
+            (p >= 0.0 && p < extent as f32).then_some(p as usize)
+        };
+        let (x0, y0) = (square.cx - square.side / 2.0, square.cy - square.side / 2.0);
+        let p = &frame.planes;
+        let mut out = Vec::new();
+        for oy in 0..res {
+            for ox in 0..res {
+                let (mut sum, mut inside) = ([0f32; 3], 0);
+                for y in (oy * n..(oy + 1) * n).filter_map(|k| at(y0, k, frame.height)) {
+                    for x in (ox * n..(ox + 1) * n).filter_map(|k| at(x0, k, frame.width)) {
+                        let v = match frame.format.packed() {
+                            Some((offsets, bpp)) => offsets
+                                .map(|o| p[0].data[y * p[0].stride + x * bpp + o] as f32 / 255.0),
+                            None => {
+                                let (cb, cr) = frame.format.chroma_at(p, x, y);
+                                [p[0].data[y * p[0].stride + x] as f32, cb as f32, cr as f32]
+                            }
+                        };
+                        sum = [sum[0] + v[0], sum[1] + v[1], sum[2] + v[2]];
+                        inside += 1;
+                    }
+                }
+                let mean = sum.map(|s| s / inside.max(1) as f32);
+                let rgb = match frame.format.packed() {
+                    Some(_) => mean,
+                    None => frame.matrix.to_rgb(mean[0], mean[1], mean[2]),
+                };
+                let share = inside as f32 / (n * n) as f32;
+                out.push(rgb.map(|v| v.clamp(0.0, 1.0) * share));
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn sampling_gives_the_per_pixel_reading_bit_for_bit() {
+        let mut seed = 7u32;
+        let mut noise = || {
+            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+            (seed >> 24) as u8
+        };
+        let formats = [
+            PixelFormat::I420,
+            PixelFormat::Nv12,
+            PixelFormat::Y444,
+            PixelFormat::Bgrx,
+            PixelFormat::Rgb,
+        ];
+        for format in formats {
+            let owned =
+                OwnedFrame::new(format, (203, 117), 5, YuvMatrix::BT601_LIMITED, &mut noise);
+            let frame = owned.frame();
+            // The detector's letterbox (partly outside), a thumbnail, a square
+            // hanging off the corner.
+            let squares = [
+                (
+                    Square {
+                        side: 203.0,
+                        ..Square::centred(203, 117)
+                    },
+                    128,
+                ),
+                (
+                    Square {
+                        cx: 90.3,
+                        cy: 60.7,
+                        side: 71.5,
+                    },
+                    16,
+                ),
+                (
+                    Square {
+                        cx: 190.0,
+                        cy: 110.0,
+                        side: 40.0,
+                    },
+                    16,
+                ),
+            ];
+            for (square, res) in squares {
+                assert_eq!(
+                    sample_square(&frame, square, res),
+                    sample_square_per_pixel(&frame, square, res),
+                    "{format:?} {square:?}"
+                );
             }
         }
     }

@@ -24,7 +24,7 @@ use super::qos::{self, Qos};
 use super::region::FaceRegion;
 use super::settings::{self, Settings};
 use super::side_stream::{self, Queued, SideStream};
-use super::stats::Stats;
+use super::stats::{Laps, Stats};
 use super::target::{TargetSlot, Update};
 use super::video::{
     self, caps_advice, face_size_problem, frame_duration, frame_view, is_gap, running_time,
@@ -433,6 +433,7 @@ impl LsydRelight {
         settings: &Settings,
     ) -> Result<gst::Buffer, gst::FlowError> {
         let started = Instant::now();
+        let mut laps = Laps::start();
         let screen = match &source {
             Source::Known(light) if settings.match_check => Some(light.clone()),
             _ => None,
@@ -456,10 +457,11 @@ impl LsydRelight {
         let show_prediction = self.monitor_src.is_linked();
         let want_prediction = show_prediction || settings.match_check;
         let time = running_time(&self.face_pad, buffer.pts()).map_or(0.0, |t| t.seconds_f64());
-        let (region, outcome) = {
+        let (region, outcome, setup_seconds, policy_seconds) = {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
+            let setup_seconds = laps.lap();
             let region = state
                 .region
                 .locate(&view, time, settings)
@@ -475,6 +477,7 @@ impl LsydRelight {
                     face.score
                 );
             }
+            laps.lap();
             let outcome = state
                 .policy
                 .process(FrameRequest {
@@ -486,7 +489,7 @@ impl LsydRelight {
                     want_prediction,
                 })
                 .map_err(|e| self.engine_failed(e))?;
-            (region, outcome)
+            (region, outcome, setup_seconds, laps.lap())
         };
         let crop = region.crop;
         gst::debug!(
@@ -508,6 +511,7 @@ impl LsydRelight {
             let paste_seconds = pasting.elapsed().as_secs_f64();
             self.count(|st| st.paste_seconds += paste_seconds);
         }
+        laps.lap();
         let outcome_shows_face = outcome.change.is_some();
         let predicted = outcome.predicted;
         let warn_nan = match outcome.action {
@@ -545,8 +549,12 @@ impl LsydRelight {
             );
         }
         let processing_seconds = started.elapsed().as_secs_f64();
+        let finish_seconds = laps.lap();
         self.count(|st| {
             st.processing_seconds += processing_seconds;
+            st.stages.setup += setup_seconds;
+            st.stages.policy += policy_seconds;
+            st.stages.finish += finish_seconds;
             st.policy = policy_counts;
             st.face_detections = follow_counts.detections;
             st.face_seconds = follow_counts.seconds;
@@ -1243,6 +1251,7 @@ impl AggregatorImpl for LsydRelight {
             self.forward_gap(&face);
             return Ok(gst::FlowSuccess::Ok);
         }
+        let started = Instant::now();
         self.sync_controlled(&face);
         let settings = self.settings();
         let face_rt = running_time(&self.face_pad, face.pts());
@@ -1286,6 +1295,8 @@ impl AggregatorImpl for LsydRelight {
                 gst::ClockTime::NONE,
             );
         }
+        let frame_seconds = started.elapsed().as_secs_f64();
+        self.count(|st| st.stages.frame += frame_seconds);
         element.finish_buffer(out)
     }
 }

@@ -32,7 +32,7 @@ def to_tensor(images: np.ndarray) -> torch.Tensor:
 
 @dataclasses.dataclass
 class Capture:
-    """One capture session as written by ``deskstage captures`` or ``import_capture``
+    """One capture session as written by ``deskstage captures``
     (the monitor frames, ``monitor.npy``), or by ``lsydrelight train`` from a capture folder
     (the monitor's light grid of each frame, ``lights.npy``, (T, 3, 16, 32) float32)."""
 

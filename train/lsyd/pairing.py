@@ -2,7 +2,7 @@
 
 A pair is two frames of the same capture session whose keypoints match (same
 pose and expression) while the monitor showed different content. Real
-captures get keypoints from a detector (``capture_import.py``); the
+captures get keypoints from a detector (``landmarks.py``); the
 simulator writes the exact projections. Both go through ``find_pairs``.
 """
 

@@ -34,7 +34,7 @@ import torch
 from PIL import Image, ImageDraw
 from tqdm import tqdm
 
-from . import capture_import, contract, data, export, pairing, train
+from . import contract, data, export, landmarks, pairing, train
 from .runs import LossWeights, TrainConfig, load_network, read_network, save_run_network
 
 # The loss weights of the starter model (and so of its fine-tuning): the paper's, with the
@@ -55,21 +55,6 @@ def sessions(work: Path) -> tuple[list[Path], list[Path]]:
         return sorted(p for p in d.iterdir() if (p / "face.npy").exists()) if d.is_dir() else []
 
     return under(work / "data" / "captures"), under(work / "heldout")
-
-
-def detect_keypoints(face: np.ndarray, name: str) -> np.ndarray:
-    """(T, 68, 2) keypoints of a session's face crops, with a progress bar; NaN where none."""
-    import mediapipe as mp
-
-    out = np.full((len(face), 68, 2), np.nan, dtype=np.float32)
-    h, w = face.shape[1:3]
-    with capture_import.landmarker() as lm:
-        for i in tqdm(range(len(face)), desc=f"keypoints {name}", unit="frame"):
-            result = lm.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(face[i])))
-            if result.face_landmarks:
-                pts = result.face_landmarks[0]
-                out[i] = [[pts[k].x * w, pts[k].y * h] for k in capture_import.MEDIAPIPE_TO_IBUG]
-    return out
 
 
 def pose_spread(keypoints: np.ndarray) -> dict:
@@ -103,7 +88,7 @@ def keypoints_stage(work: Path) -> None:
     for session in [*train_sessions, *held_sessions]:
         path = session / "keypoints.npy"
         if not path.exists():
-            kp = detect_keypoints(np.load(session / "face.npy", mmap_mode="r"), session.name)
+            kp = landmarks.detect_keypoints(np.load(session / "face.npy", mmap_mode="r"), f"keypoints {session.name}")
             np.save(session.joinpath("keypoints.tmp.npy"), kp)
             session.joinpath("keypoints.tmp.npy").replace(path)
         kp = np.load(path)

@@ -1,11 +1,16 @@
 //! What the user is told while recording, measured from the data: how many
-//! camera frames are usable for training, how much of the face's light comes
+//! camera frames are usable for training, how many of them can pair with
+//! another (the same pose under different screen light, which is what the
+//! trainer learns from), how much of the face's light comes
 //! from the monitor rather than the room, whether the face is in view, whether
 //! pose and expression vary, and which head poses the session has covered.
 //! GStreamer-free: the capture feeds it camera and screen observations in
 //! running time, in any interleaving of the two streams.
 
 use std::collections::VecDeque;
+use std::sync::Arc;
+
+use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS};
 
 use serde::Serialize;
 
@@ -28,6 +33,27 @@ pub const MOTION_WINDOW_SECONDS: f64 = 4.0;
 /// Below this keypoint spread (summed standard deviations of face-relative
 /// keypoint positions) pose and expression count as barely varying.
 pub const MIN_KEYPOINT_SPREAD: f64 = 0.06;
+/// Two frames pair when their keypoints (eyes, nose tip, mouth) lie within
+/// this share of the eye distance of each other, on average, in the frame's
+/// pixels. The trainer pairs by 68 keypoints at 0.02; the detector's four are
+/// coarser, so this is an estimate, calibrated on simulated captures (README,
+/// "Your own light stage"). Where the face is counts: compared relative to the
+/// eyes instead, a naturally moving head that the trainer paired nowhere
+/// counted 61 % of its frames. On small faces (eyes under 30 px apart) the
+/// detector's keypoints shift with the light on the face, and a full-screen
+/// black-to-white flip can hide real pairs.
+pub const PAIR_KEYPOINT_DISTANCE: f32 = 0.03;
+/// ... and their screen lights differ by at least this mean absolute difference
+/// (linear light), the trainer's rule.
+pub const PAIR_LIGHT_DIFFERENCE: f32 = 0.03;
+/// The share of usable frames that pair is judged over this much recent time ...
+pub const PAIRING_WINDOW_SECONDS: f64 = 20.0;
+/// ... and below this share the user is told how to get more.
+pub const MIN_PAIRABLE_SHARE: f64 = 0.1;
+/// The light is compared on the contract's grid averaged over blocks of 2 x 2
+/// cells: a quarter of the memory and time, and a block's difference is at
+/// most its cells' mean difference, so pairs are never overcounted.
+const PAIR_LIGHT_LEN: usize = 3 * (LIGHT_ROWS / 2) * (LIGHT_COLS / 2);
 /// A warning that still holds is repeated after this long.
 pub const REPEAT_SECONDS: f64 = 30.0;
 /// Head-turn bins (nose offset from the eyes' midpoint, in face widths) and
@@ -64,6 +90,11 @@ impl Face {
         ]
     }
 
+    fn eye_distance(&self) -> f32 {
+        let [r, l] = self.eyes;
+        ((l[0] - r[0]).powi(2) + (l[1] - r[1]).powi(2)).sqrt()
+    }
+
     fn pose_bin(&self) -> usize {
         let [yaw, pitch, _] = self.descriptor();
         let yaw_bin = YAW_EDGES.iter().filter(|&&e| yaw > e).count();
@@ -88,6 +119,48 @@ pub enum WarningKind {
     RoomOverpowersMonitor,
     FaceLost,
     PoseFrozen,
+    FewPairs,
+}
+
+struct ScreenFrame {
+    t: f64,
+    /// Mean linear luminance.
+    luminance: f64,
+    /// The light, averaged over 2 x 2 cells (planar RGB).
+    light: Arc<[f32]>,
+}
+
+/// A usable frame, as the pairing sees it.
+struct PairCandidate {
+    t: f64,
+    /// Eyes, nose tip, mouth in the frame's pixels.
+    points: [[f32; 2]; 4],
+    eye_distance: f32,
+    light: Arc<[f32]>,
+    paired: bool,
+}
+
+impl PairCandidate {
+    fn matches(&self, other: &PairCandidate) -> bool {
+        let scale = 0.5 * (self.eye_distance + other.eye_distance);
+        let keypoints = self
+            .points
+            .iter()
+            .zip(&other.points)
+            .map(|(a, b)| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt())
+            .sum::<f32>()
+            / (4.0 * scale.max(1.0));
+        keypoints <= PAIR_KEYPOINT_DISTANCE && {
+            let light = self
+                .light
+                .iter()
+                .zip(other.light.iter())
+                .map(|(a, b)| (a - b).abs())
+                .sum::<f32>()
+                / PAIR_LIGHT_LEN as f32;
+            light >= PAIR_LIGHT_DIFFERENCE
+        }
+    }
 }
 
 /// A camera frame waiting for the screen frames around it.
@@ -101,6 +174,9 @@ struct Pending {
 pub struct Summary {
     pub camera_frames: u64,
     pub usable_frames: u64,
+    /// Usable frames with at least one partner: the same pose under a different
+    /// screen light ([`PAIR_KEYPOINT_DISTANCE`], [`PAIR_LIGHT_DIFFERENCE`]).
+    pub pairable_frames: u64,
     pub frames_with_face: u64,
     /// The monitor's share of the face's light over the last [`SHARE_WINDOW_SECONDS`],
     /// when measurable.
@@ -120,9 +196,8 @@ pub struct Summary {
 
 #[derive(Default)]
 pub struct Guidance {
-    /// Screen frames' (time, mean linear luminance), oldest first, the last
-    /// [`SHARE_WINDOW_SECONDS`] and a little more.
-    screen: VecDeque<(f64, f64)>,
+    /// Screen frames, oldest first, the last [`SHARE_WINDOW_SECONDS`] and a little more.
+    screen: VecDeque<ScreenFrame>,
     /// Last screen frame time seen.
     screen_latest: Option<f64>,
     pending: VecDeque<Pending>,
@@ -132,12 +207,14 @@ pub struct Guidance {
     totals: [f64; 5],
     /// (time, descriptor) of recent frames with a face.
     descriptors: VecDeque<(f64, [f64; 3])>,
+    /// Every usable frame of the session, for pairing.
+    pair_candidates: Vec<PairCandidate>,
     last_face: Option<f64>,
     first_frame: Option<f64>,
     last_frame: Option<f64>,
     summary: Summary,
     /// When each warning kind was last given; None while its condition is clear.
-    warned: [Option<f64>; 3],
+    warned: [Option<f64>; 4],
     new_warnings: Vec<Warning>,
 }
 
@@ -146,6 +223,7 @@ fn kind_index(k: WarningKind) -> usize {
         WarningKind::RoomOverpowersMonitor => 0,
         WarningKind::FaceLost => 1,
         WarningKind::PoseFrozen => 2,
+        WarningKind::FewPairs => 3,
     }
 }
 
@@ -161,14 +239,19 @@ impl Guidance {
         }
     }
 
-    /// A screen frame shown at `t` seconds with mean linear luminance `luminance`.
-    pub fn screen(&mut self, t: f64, luminance: f64) {
-        self.screen.push_back((t, luminance));
+    /// A screen frame shown at `t` seconds whose monitor light (the contract's
+    /// grid, planar linear RGB) is `light`.
+    pub fn screen(&mut self, t: f64, light: &[f32]) {
+        self.screen.push_back(ScreenFrame {
+            t,
+            luminance: light_luminance(light),
+            light: pairing_light(light),
+        });
         self.screen_latest = Some(self.screen_latest.map_or(t, |l| l.max(t)));
         while self
             .screen
             .get(1)
-            .is_some_and(|&(t1, _)| t1 < t - SHARE_WINDOW_SECONDS - 1.0)
+            .is_some_and(|s| s.t < t - SHARE_WINDOW_SECONDS - 1.0)
         {
             self.screen.pop_front();
         }
@@ -223,13 +306,9 @@ impl Guidance {
         }
     }
 
-    /// Screen luminance of the latest screen frame at or before `t`.
-    fn screen_at(&self, t: f64) -> Option<f64> {
-        self.screen
-            .iter()
-            .rev()
-            .find(|&&(ts, _)| ts <= t)
-            .map(|&(_, l)| l)
+    /// The latest screen frame at or before `t`.
+    fn screen_at(&self, t: f64) -> Option<&ScreenFrame> {
+        self.screen.iter().rev().find(|s| s.t <= t)
     }
 
     fn judge(&mut self, p: Pending) {
@@ -237,7 +316,9 @@ impl Guidance {
         self.summary.camera_frames += 1;
         self.first_frame.get_or_insert(t);
         self.last_frame = Some(t);
-        let light = self.screen_at(t);
+        let light = self
+            .screen_at(t)
+            .map(|s| (s.luminance, Arc::clone(&s.light)));
         match p.face {
             Some(face) => {
                 let gap = self.time_without_face(t);
@@ -256,8 +337,9 @@ impl Guidance {
                     let cols = YAW_EDGES.len() + 1;
                     s.pose_bin_frames[bin / cols][bin % cols] += 1;
                 }
-                if let (true, Some(screen)) = (usable, light) {
+                if let (true, Some((screen, screen_light))) = (usable, light) {
                     s.usable_frames += 1;
+                    self.pair(t, &face, screen_light);
                     let y = face.luminance;
                     self.pairs.push_back((t, screen, y));
                     let x = screen;
@@ -296,6 +378,7 @@ impl Guidance {
         }
         self.measure_share(t);
         self.measure_motion(t);
+        self.judge_pairing(t);
         let s = &mut self.summary;
         s.pose_bins_covered = s
             .pose_bin_frames
@@ -303,6 +386,61 @@ impl Guidance {
             .flatten()
             .filter(|&&n| n > 0)
             .count();
+    }
+
+    /// Pairs the usable frame at `t` with every earlier one it matches.
+    fn pair(&mut self, t: f64, face: &Face, light: Arc<[f32]>) {
+        let mut new = PairCandidate {
+            t,
+            points: [face.eyes[0], face.eyes[1], face.nose, face.mouth],
+            eye_distance: face.eye_distance(),
+            light,
+            paired: false,
+        };
+        for old in &mut self.pair_candidates {
+            if old.matches(&new) {
+                if !old.paired {
+                    old.paired = true;
+                    self.summary.pairable_frames += 1;
+                }
+                new.paired = true;
+            }
+        }
+        if new.paired {
+            self.summary.pairable_frames += 1;
+        }
+        self.pair_candidates.push(new);
+    }
+
+    /// Warns when few of the last [`PAIRING_WINDOW_SECONDS`] of usable frames
+    /// pair: moving all the time, hardly a pose repeats.
+    fn judge_pairing(&mut self, t: f64) {
+        let Some(first) = self.pair_candidates.first() else {
+            return;
+        };
+        if t - first.t < PAIRING_WINDOW_SECONDS {
+            return;
+        }
+        let recent = self
+            .pair_candidates
+            .iter()
+            .rev()
+            .take_while(|c| c.t >= t - PAIRING_WINDOW_SECONDS);
+        let (frames, paired) = recent.fold((0u64, 0u64), |(n, p), c| (n + 1, p + c.paired as u64));
+        if frames > 0 && (paired as f64) < MIN_PAIRABLE_SHARE * frames as f64 {
+            self.warn(
+                t,
+                WarningKind::FewPairs,
+                format!(
+                    "only {paired} of the last {frames} usable frames show a pose seen under \
+                     other screen light, and only such pairs train the model: hold your head \
+                     still for 2 to 3 s at a time while the screen changes, then move to a new \
+                     pose"
+                ),
+            );
+        } else {
+            self.clear(WarningKind::FewPairs);
+        }
     }
 
     fn measure_share(&mut self, t: f64) {
@@ -453,8 +591,24 @@ pub fn face_luminance(
     if n == 0 { 0.0 } else { sum / n as f64 }
 }
 
+/// The light averaged over blocks of 2 x 2 cells, for pairing.
+fn pairing_light(planar_rgb: &[f32]) -> Arc<[f32]> {
+    let (rows, cols) = (LIGHT_ROWS / 2, LIGHT_COLS / 2);
+    debug_assert_eq!(planar_rgb.len(), 3 * LIGHT_ROWS * LIGHT_COLS);
+    let mut out = vec![0.0f32; PAIR_LIGHT_LEN];
+    for c in 0..3 {
+        for y in 0..LIGHT_ROWS {
+            for x in 0..LIGHT_COLS {
+                out[(c * rows + y / 2) * cols + x / 2] +=
+                    0.25 * planar_rgb[(c * LIGHT_ROWS + y) * LIGHT_COLS + x];
+            }
+        }
+    }
+    out.into()
+}
+
 /// Mean linear luminance of a monitor light (planar linear RGB, cells equal in area).
-pub fn light_luminance(planar_rgb: &[f32]) -> f64 {
+fn light_luminance(planar_rgb: &[f32]) -> f64 {
     let n = planar_rgb.len() / 3;
     let mean = |c: usize| {
         planar_rgb[c * n..(c + 1) * n]
@@ -483,17 +637,28 @@ mod tests {
         }
     }
 
+    /// A screen light of one grey level everywhere; its luminance is `level`.
+    fn grey(level: f64) -> Vec<f32> {
+        vec![level as f32; 3 * LIGHT_ROWS * LIGHT_COLS]
+    }
+
     /// A screen that alternates between dark and bright every 0.5 s, its frames
     /// at 30 fps, and a camera at 10 fps whose face is lit by `room` plus the screen.
     fn run(seconds: f64, room: f64, face_at: impl Fn(f64) -> Option<(f32, f32)>) -> Guidance {
+        run_faces(seconds, room, |t, luminance| {
+            face_at(t).map(|(size, turn)| face(size, turn, luminance))
+        })
+    }
+
+    /// As [`run`], with the whole face given for each time and face luminance.
+    fn run_faces(seconds: f64, room: f64, face_at: impl Fn(f64, f64) -> Option<Face>) -> Guidance {
         let mut g = Guidance::new();
         let screen = |t: f64| if (t * 2.0) as i64 % 2 == 0 { 0.1 } else { 0.6 };
         for i in 0..(seconds * 30.0) as usize {
             let t = i as f64 / 30.0;
-            g.screen(t, screen(t));
+            g.screen(t, &grey(screen(t)));
             if i % 3 == 0 {
-                let f = face_at(t).map(|(size, turn)| face(size, turn, 0.5 * (room + screen(t))));
-                g.camera(t, f);
+                g.camera(t, face_at(t, 0.5 * (room + screen(t))));
             }
         }
         g.finish();
@@ -563,12 +728,65 @@ mod tests {
         assert_eq!(g.summary().frames_with_face, 120);
     }
 
+    /// Holding each of a few poses for 2 s, then moving to the next.
+    fn holding(t: f64) -> Option<(f32, f32)> {
+        Some((80.0, [-0.15, 0.0, 0.15][(t / 2.0) as usize % 3]))
+    }
+
+    #[test]
+    fn a_head_that_never_holds_a_pose_gives_no_pairs_and_is_told_how_to() {
+        // Sliding sideways at 20 px a second (0.06 eye distances a camera frame), and
+        // turning to and fro: never the same place twice, not even across a screen change.
+        let g = run_faces(25.0, 0.05, |t, luminance| {
+            let mut f = face(80.0, 0.0, luminance);
+            let shift = 20.0 * t as f32;
+            let [right, left] = &mut f.eyes;
+            for p in [right, left, &mut f.nose, &mut f.mouth] {
+                p[0] += shift;
+            }
+            f.nose[0] += 12.0 * (t * std::f64::consts::TAU / 4.0).sin() as f32;
+            Some(f)
+        });
+        let s = g.summary();
+        assert_eq!(s.usable_frames, 250);
+        assert_eq!(s.pairable_frames, 0);
+        assert_eq!(kinds(&g), [WarningKind::FewPairs]);
+        let w = &s.warnings[0];
+        assert!(
+            w.at >= PAIRING_WINDOW_SECONDS && w.at < PAIRING_WINDOW_SECONDS + 0.2,
+            "{w:?}"
+        );
+        assert!(w.message.contains("only 0 of the last 2"), "{}", w.message);
+        assert!(w.message.contains("hold your head still"), "{}", w.message);
+    }
+
+    #[test]
+    fn holding_poses_while_the_screen_changes_gives_pairs() {
+        let g = run(25.0, 0.05, holding);
+        let s = g.summary();
+        // Every frame shares its pose with frames half a second away, under the other light.
+        assert_eq!(s.pairable_frames, s.usable_frames);
+        assert!(kinds(&g).is_empty(), "{:?}", s.warnings);
+    }
+
+    #[test]
+    fn the_same_pose_under_the_same_light_is_no_pair() {
+        let mut g = Guidance::new();
+        for i in 0..300 {
+            let t = i as f64 / 10.0;
+            g.screen(t, &grey(0.3));
+            g.camera(t, Some(face(80.0, 0.0, 0.4)));
+        }
+        g.finish();
+        assert_eq!(g.summary().pairable_frames, 0);
+    }
+
     #[test]
     fn a_steady_screen_leaves_the_share_unknown() {
         let mut g = Guidance::new();
         for i in 0..100 {
             let t = i as f64 / 10.0;
-            g.screen(t, 0.3);
+            g.screen(t, &grey(0.3));
             g.camera(t, Some(face(80.0, 0.0, 0.4)));
         }
         g.finish();
@@ -580,9 +798,9 @@ mod tests {
         let mut g = Guidance::new();
         g.camera(0.05, Some(face(80.0, 0.0, 0.4)));
         assert_eq!(g.summary().camera_frames, 0, "its light is not known yet");
-        g.screen(0.0, 0.2);
+        g.screen(0.0, &grey(0.2));
         assert_eq!(g.summary().camera_frames, 0);
-        g.screen(0.1, 0.2);
+        g.screen(0.1, &grey(0.2));
         assert_eq!(g.summary().usable_frames, 1);
     }
 

@@ -29,16 +29,18 @@ use record::Recorder;
     long_about = "Record a session of your own light stage: your webcam while your monitor shows \
         varied content.\n\n\
         Sit at your desk facing the webcam, with the room as dark as you can make it, and watch \
-        varied videos full-screen (or pass --playlist to have them played); turn and tilt your \
-        head, talk and smile now and then. The webcam and the screen are recorded together, in one \
+        varied videos full-screen (or pass --playlist to have them played); hold your head still \
+        for 2 to 3 s at a time while the screen changes, then turn or tilt it to a new pose, \
+        talk and smile now and then. The webcam and the screen are recorded together, in one \
         GStreamer pipeline on one clock, into --out DIR as a new session (session-000, \
         session-001, ...; capture.json lists them). `lsydrelight train` makes a model of you \
         from the folder.\n\n\
         While recording, a status line counts the usable frames (a face found, large enough, \
-        the screen's light known), the monitor's share of the light on your face (measured from \
+        the screen's light known) and how many of them pair with another (the same pose under \
+        different screen light: what the model learns from), the monitor's share of the light on your face (measured from \
         how your face's brightness follows the screen's), and the head poses covered; warnings \
-        say when the room light overpowers the monitor, when your face leaves the picture and \
-        when your pose and expression stop changing. Their summary is kept in the session's \
+        say when the room light overpowers the monitor, when your face leaves the picture, \
+        when your pose and expression stop changing and when no pose has repeated for a while. Their summary is kept in the session's \
         session.json.\n\n\
         Privacy: by default no screen content is stored, only the monitor's light: each screen \
         frame averaged down to a 16 x 32 grid of colours (light.npy), in which text, faces and \
@@ -222,11 +224,12 @@ fn record(args: &Args, quiet: bool) -> Result<Status, Failure> {
     partial.commit()?;
     capture.add_session(&name, args.held_out)?;
     bars.result(&format!(
-        "{} {name}: {:.1} s, {} camera frames ({} usable), {} screen frames{}{} -> {}",
+        "{} {name}: {:.1} s, {} camera frames ({} usable, {} pairable), {} screen frames{}{} -> {}",
         if end == End::Stopped { "stopped" } else { "ok" },
         seconds,
         session.camera_frames,
         summary.usable_frames,
+        summary.pairable_frames,
         light_frames,
         summary.monitor_share.map_or(String::new(), |s| format!(
             ", monitor {:.0} % of the face's light",
@@ -360,7 +363,7 @@ fn status_text(r: &Recorder, stopping: Option<End>) -> String {
         None => "measuring".into(),
     };
     format!(
-        "{} {:>5.1} s | usable frames {} of {} | monitor's share of face light {} | poses {}/{}{}",
+        "{} {:>5.1} s | usable frames {} of {}, pairable {} | monitor's share of face light {} | poses {}/{}{}",
         if stopping.is_some() {
             "finishing"
         } else {
@@ -369,6 +372,7 @@ fn status_text(r: &Recorder, stopping: Option<End>) -> String {
         t,
         s.usable_frames,
         r.camera_frames,
+        s.pairable_frames,
         share,
         s.pose_bins_covered,
         s.pose_bins,

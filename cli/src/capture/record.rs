@@ -93,7 +93,7 @@ impl Recorder {
         lw.append(&light.0).map_err(io)?;
         tw.append(&[t]).map_err(io)?;
         self.screen_time = Some(t);
-        self.guidance.screen(t, guidance::light_luminance(&light.0));
+        self.guidance.screen(t, &light.0);
         Ok(())
     }
 

@@ -61,11 +61,18 @@ pub struct Graph {
     face_sink: gst::Pad,
     /// Relit frames that left the element.
     frames: Arc<AtomicU64>,
+    /// Predicted-monitor frames that left the element (not the gaps that stand
+    /// for face frames without a prediction).
+    predicted_frames: Arc<AtomicU64>,
 }
 
 impl Graph {
     pub fn frames(&self) -> u64 {
         self.frames.load(Ordering::Relaxed)
+    }
+
+    pub fn predicted_frames(&self) -> u64 {
+        self.predicted_frames.load(Ordering::Relaxed)
     }
 
     /// The face recording's length in frames, once its duration and frame rate are known.
@@ -134,23 +141,29 @@ pub fn build(
         )?;
     }
 
-    let frames = Arc::new(AtomicU64::new(0));
-    let counter = frames.clone();
-    let src = relight
-        .static_pad("src")
-        .ok_or_else(|| internal("no src pad"))?;
-    src.add_probe(gst::PadProbeType::BUFFER, move |_, _| {
-        counter.fetch_add(1, Ordering::Relaxed);
-        gst::PadProbeReturn::Ok
-    });
     let face_sink = relight
         .static_pad("sink")
         .ok_or_else(|| internal("no sink pad"))?;
     Ok(Graph {
         pipeline,
         face_sink,
-        frames,
+        frames: count_buffers(&relight, "src")?,
+        predicted_frames: count_buffers(&relight, "monitor_src")?,
     })
+}
+
+/// A count of the buffers leaving `element`'s pad `pad`.
+fn count_buffers(element: &gst::Element, pad: &str) -> Result<Arc<AtomicU64>, Failure> {
+    let count = Arc::new(AtomicU64::new(0));
+    let counter = count.clone();
+    element
+        .static_pad(pad)
+        .ok_or_else(|| internal(format!("no {pad} pad")))?
+        .add_probe(gst::PadProbeType::BUFFER, move |_, _| {
+            counter.fetch_add(1, Ordering::Relaxed);
+            gst::PadProbeReturn::Ok
+        });
+    Ok(count)
 }
 
 /// `filesrc ! parsebin`: the first video stream is decoded into the element;

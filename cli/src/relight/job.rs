@@ -125,6 +125,7 @@ pub fn run(settings: &Settings, files: &Files, bars: &Bars, bar: &Bar) -> Outcom
     let end = watch(&graph, files, bars, bar);
     let time = started.elapsed();
     let frames = graph.frames();
+    let predicted_frames = graph.predicted_frames();
     // Stops the pipeline, which closes the files before they are renamed.
     drop(graph);
     bar.finish();
@@ -138,6 +139,21 @@ pub fn run(settings: &Settings, files: &Files, bars: &Bars, bar: &Bar) -> Outcom
             )));
         }
         Ok(end) => end,
+    };
+    // With no face ever found nothing was predicted: a file without frames
+    // would not play, so none is written.
+    let predicted = match predicted {
+        Some(p) if predicted_frames == 0 => {
+            bars.note(&format!(
+                "warning: {}: no face was found in any frame, so there is no predicted monitor; \
+                 {} was not written",
+                files.face.display(),
+                p.dest().display()
+            ));
+            // Dropped uncommitted: its temporary file is removed.
+            None
+        }
+        kept => kept,
     };
     let committed = out
         .commit()

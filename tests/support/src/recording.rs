@@ -93,7 +93,7 @@ fn sq_err(a: &RgbImage, b: &RgbImage, region: Option<(usize, usize, usize)>) -> 
 const DESKSTAGE_Y4M: &str = "video/x-raw,colorimetry=bt601,chroma-site=jpeg";
 
 /// A pipeline fragment that plays a deskstage `.y4m` file with its true colorimetry.
-fn play_y4m(path: &Path) -> String {
+pub fn play_y4m(path: &Path) -> String {
     format!(
         "filesrc location=\"{}\" ! y4mdec ! capssetter caps=\"{DESKSTAGE_Y4M}\"",
         path.display()
