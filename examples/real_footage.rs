@@ -5,8 +5,11 @@
 //!
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
-//!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter]
+//!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter] [--format RGB|I420]
 //! ```
+//!
+//! `--format I420` feeds the element I420, as webcams deliver frames, and compares
+//! its output with the input after the same round trip through I420 and back.
 //!
 //! The media come from packages, fetched by `scripts/setup.sh full` into
 //! `target/real-media` (never committed): scikit-image's `astronaut.png` (PyPI,
@@ -26,7 +29,7 @@ use deskstage::monitor::RgbImage;
 use lsydrelight_testkit::{
     checkout,
     flags::flag,
-    footage::{decode, read_y4m, relight},
+    footage::{Format, decode, read_y4m, relight, through},
     init,
     quality::{BoxEdge, Region, box_edge, change_map, mean_level, mottling, pumping},
     recording::ensure_recording,
@@ -107,9 +110,11 @@ fn measure(
     model: &Path,
     target: &Path,
     out: &Path,
+    format: Format,
 ) -> Result<Measured, String> {
+    let input = through(&input, format)?;
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
-        relight(&input, model, target)?.into_iter().unzip();
+        relight(&input, model, target, format)?.into_iter().unzip();
     // The face measures look at the square the element relit.
     let regions: Vec<Region> = regions
         .into_iter()
@@ -185,6 +190,7 @@ fn main() -> Result<(), String> {
     let model = flag("--model").map_or_else(gstlsydrelight::paths::default_model, PathBuf::from);
     let frames: usize =
         flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
+    let format = flag("--format").map_or(Ok(Format::Rgb), |f| Format::parse(&f))?;
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
@@ -201,7 +207,15 @@ fn main() -> Result<(), String> {
                 path.display()
             ));
         }
-        let m = measure(name, decode(&path, frames)?, None, &model, &target, &out)?;
+        let m = measure(
+            name,
+            decode(&path, frames)?,
+            None,
+            &model,
+            &target,
+            &out,
+            format,
+        )?;
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
@@ -221,7 +235,7 @@ fn main() -> Result<(), String> {
         let input = read_y4m(&dir.join("face.y4m"), frames)?;
         let truth = read_y4m(&dir.join("truth-sunset.y4m"), frames)?;
         let target = dir.join("target-sunset.png");
-        let m = measure(recording, input, Some(truth), &model, &target, &out)?;
+        let m = measure(recording, input, Some(truth), &model, &target, &out, format)?;
         let t = m.truth.expect("a recording has its truth");
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use deskstage::monitor::RgbImage;
 use lsydrelight_testkit::{
     checkout,
-    footage::{decode, read_y4m, relight},
+    footage::{Format, decode, read_y4m, relight},
     init,
     quality::{Region, box_edge_score, mean_level, mottling, pumping},
     recording::ensure_recording,
@@ -36,7 +36,7 @@ fn media(name: &str) -> Option<PathBuf> {
 /// (input, output) mean levels.
 fn measure(input: &[RgbImage], target: PathBuf) -> Vec<(f64, f64, (f64, f64))> {
     let model = gstlsydrelight::paths::default_model();
-    let output = relight(input, &model, &target).unwrap();
+    let output = relight(input, &model, &target, Format::Rgb).unwrap();
     input
         .iter()
         .zip(output)

@@ -1,6 +1,7 @@
 //! Footage through the element without a monitor stream, for the measures
 //! that need no ground truth ([`crate::quality`]): decoding a clip or a still
-//! to RGB frames, and relighting them.
+//! to RGB frames, and relighting them in packed RGB or, as webcams deliver
+//! them, in I420.
 
 use std::path::Path;
 
@@ -67,6 +68,45 @@ pub fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
     Ok(out)
 }
 
+/// The pixel format frames reach the element in.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    Rgb,
+    /// What most webcams and video files deliver: 4:2:0, chroma at half resolution.
+    I420,
+}
+
+impl Format {
+    pub fn parse(name: &str) -> Result<Format, String> {
+        match name {
+            "RGB" => Ok(Format::Rgb),
+            "I420" => Ok(Format::I420),
+            _ => Err(format!("--format {name}: RGB or I420")),
+        }
+    }
+
+    /// The conversion into this format and the one back to RGB, round an element.
+    fn around(self, element: &str) -> String {
+        match self {
+            Format::Rgb => element.to_string(),
+            // No dither: the round trip alone must not make noise the measures would count.
+            Format::I420 => format!(
+                "videoconvert dither=none ! video/x-raw,format=I420 ! {element} ! \
+                 videoconvert dither=none ! video/x-raw,format=RGB"
+            ),
+        }
+    }
+}
+
+/// `frames` as they come out of a round trip through `format`: the input a
+/// camera in that format gives, to compare the element's output with.
+pub fn through(frames: &[RgbImage], format: Format) -> Result<Vec<RgbImage>, String> {
+    Ok(run(frames, &format.around("identity"))?
+        .into_iter()
+        .map(|(img, _)| img)
+        .collect())
+}
+
 /// The frames relit by the element with no monitor stream by `model`, each
 /// with the square the element relit (its `face` region-of-interest meta; None
 /// when it relit none).
@@ -74,14 +114,23 @@ pub fn relight(
     frames: &[RgbImage],
     model: &Path,
     target: &Path,
+    format: Format,
 ) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+    let element = format!(
+        "lsydrelight name=r model-location=\"{}\" target-location=\"{}\"",
+        model.display(),
+        target.display()
+    );
+    run(frames, &format.around(&element))
+}
+
+/// `frames` pushed through `middle` (a gst-launch fragment) one at a time,
+/// with the face region each came out with.
+fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
     let (w, h) = (frames[0].width as u32, frames[0].height as u32);
     let caps = rgb_caps(w, h, 30);
     let pipeline = gst::parse::launch(&format!(
-        "appsrc name=src format=time ! lsydrelight name=r model-location=\"{}\" \
-         target-location=\"{}\" ! appsink name=sink sync=false",
-        model.display(),
-        target.display()
+        "appsrc name=src format=time ! {middle} ! appsink name=sink sync=false"
     ))
     .map_err(|e| e.to_string())?
     .downcast::<gst::Bin>()
@@ -97,7 +146,7 @@ pub fn relight(
     src.set_caps(Some(&caps));
     pipeline
         .set_state(gst::State::Playing)
-        .map_err(|e| format!("the element does not start: {e}"))?;
+        .map_err(|e| format!("{middle} does not start: {e}"))?;
     let mut out = Vec::with_capacity(frames.len());
     for (i, img) in frames.iter().enumerate() {
         let mut buffer = gst::Buffer::from_mut_slice(img.data.clone());
