@@ -3,7 +3,7 @@
 # beside a model trained on the simulator's own dataset of the same person for the same
 # budget.
 #
-#   scripts/stranger.sh [OUT]      (default target/stranger; STRANGER_STEPS=500, STRANGER_SUBJECT=200)
+#   scripts/stranger.sh [OUT]      (default target/stranger; STRANGER_STEPS=100, STRANGER_SUBJECT=200)
 #
 # 1. `lsydrelight capture` records the simulated person (the deskstagecam webcam, lit by
 #    exactly what the capture's screen branch shows) in three sessions: 30 s moving
@@ -19,7 +19,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=$(realpath -m "${1:-target/stranger}")
-steps=${STRANGER_STEPS:-500}
+steps=${STRANGER_STEPS:-100}
 person=${STRANGER_SUBJECT:-200}
 py=$PWD/.venv/bin/python
 export OMP_WAIT_POLICY=PASSIVE
