@@ -487,10 +487,9 @@ impl FramePolicy {
         source: Source,
         want_prediction: bool,
     ) -> Result<FrameOutput, EngineError> {
-        let Some((_, target_code)) = &self.target else {
+        if self.target.is_none() {
             return Err(EngineError::Inference("no target light is set".into()));
-        };
-        let target_code = target_code.clone();
+        }
         let encoded = self.relighter.encode(image)?;
         let predicted = if want_prediction || source == Source::Unknown {
             self.counts.predictions += 1;
@@ -516,19 +515,24 @@ impl FramePolicy {
         let averaged = timed(&mut self.counts.filter_seconds, || {
             self.averager.push(this_source)
         });
-        let source_code = match &self.source_code {
-            // A still screen gives the same averaged light frame after frame.
-            Some((light, code)) if *light == averaged => code.clone(),
-            _ => {
-                let code = self.relighter.encode_light(&averaged)?;
-                self.counts.source_encodes += 1;
-                self.source_code.insert((averaged.clone(), code)).1.clone()
-            }
+        // A still screen gives the same averaged light frame after frame: its code is kept.
+        if self
+            .source_code
+            .as_ref()
+            .is_none_or(|(light, _)| *light != averaged)
+        {
+            let code = self.relighter.encode_light(&averaged)?;
+            self.counts.source_encodes += 1;
+            self.source_code = Some((averaged.clone(), code));
+        }
+        let (Some((_, source_code)), Some((_, target_code))) = (&self.source_code, &self.target)
+        else {
+            unreachable!("the source code is set above and the target checked at the start");
         };
         let (smoother, filter_seconds) = (&mut self.smoother, &mut self.counts.filter_seconds);
         let relit = self
             .relighter
-            .relight(&encoded, &source_code, &target_code, |features| {
+            .relight(&encoded, source_code, target_code, |features| {
                 timed(filter_seconds, || smoother.smooth(features))
             })?;
         match relit {
