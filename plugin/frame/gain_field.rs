@@ -263,11 +263,11 @@ impl GainField {
             let Some(c) = *channel else {
                 continue;
             };
-            let mut maps = vec![(&self.gain[c][row.clone()], &mut out.gain)];
-            if self.pivot[c].is_none() {
-                maps.push((&self.offset[c][row.clone()], &mut out.offset));
-            }
-            for (m, out) in maps {
+            let offset = self.pivot[c]
+                .is_none()
+                .then(|| (&self.offset[c][row.clone()], &mut out.offset));
+            let gain = (&self.gain[c][row.clone()], &mut out.gain);
+            for (m, out) in std::iter::once(gain).chain(offset) {
                 for (&(lx, tx), o) in taps.iter().zip(out.iter_mut().skip(lane).step_by(BPP)) {
                     *o = m[lx] + (m[lx + 1] - m[lx]) * tx;
                 }
