@@ -270,29 +270,25 @@ fn train(args: &Args, quiet: bool) -> Result<Status, Failure> {
             check_model(&out, crop, &bars)
         },
     )?;
-    stages.run(6, "evaluate on the held-out session; model card", || {
-        let mut a: Vec<OsString> = vec!["evaluate".into()];
+    // The held-out stages: the model relit to the shipped targets.
+    let on_model = |stage: &str| -> Vec<OsString> {
+        let mut a: Vec<OsString> = vec![stage.into()];
         a.extend(work_arg());
         a.extend([
             "--model".into(),
             out.clone().into(),
             "--targets".into(),
             checkout.join("models/targets").into(),
-            "--command".into(),
-            command_line().into(),
         ]);
+        a
+    };
+    stages.run(6, "evaluate on the held-out session; model card", || {
+        let mut a = on_model("evaluate");
+        a.extend(["--command".into(), command_line().into()]);
         finished(trainer.run(&a)?)
     })?;
     stages.run(7, "before/after sheet", || {
-        let mut a: Vec<OsString> = vec!["sheet".into()];
-        a.extend(work_arg());
-        a.extend([
-            "--model".into(),
-            out.clone().into(),
-            "--targets".into(),
-            checkout.join("models/targets").into(),
-        ]);
-        finished(trainer.run(&a)?)
+        finished(trainer.run(&on_model("sheet"))?)
     })?;
     let times: serde_json::Map<_, _> = stages
         .times
