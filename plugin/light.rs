@@ -29,6 +29,11 @@ fn srgb_to_linear(v: f32) -> f32 {
     }
 }
 
+/// An 8-bit sRGB value as linear light in [0, 1] (from a table built once).
+pub fn srgb_byte_to_linear(v: u8) -> f32 {
+    decode_tables().bytes[v as usize]
+}
+
 /// The sRGB transfer function: linear light in [0, 1] to an 8-bit value.
 pub fn linear_to_srgb_byte(v: f32) -> u8 {
     let v = v.clamp(0.0, 1.0);

@@ -10,7 +10,7 @@
 use std::collections::VecDeque;
 use std::sync::Arc;
 
-use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS};
+use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, srgb_byte_to_linear};
 
 use serde::Serialize;
 
@@ -562,14 +562,6 @@ pub fn face_luminance(
     centre: [f32; 2],
     size: [f32; 2],
 ) -> f64 {
-    let decode: [f64; 256] = std::array::from_fn(|i| {
-        let v = i as f64 / 255.0;
-        if v <= 0.04045 {
-            v / 12.92
-        } else {
-            ((v + 0.055) / 1.055).powf(2.4)
-        }
-    });
     let span = |c: f32, half: f32, extent: usize| {
         let a = (c - half).max(0.0) as usize;
         let b = ((c + half).max(0.0) as usize).min(extent);
@@ -582,9 +574,8 @@ pub fn face_luminance(
         let row = &rgb[y * stride..];
         for x in xs.clone() {
             let p = &row[x * 3..x * 3 + 3];
-            sum += 0.2126 * decode[p[0] as usize]
-                + 0.7152 * decode[p[1] as usize]
-                + 0.0722 * decode[p[2] as usize];
+            let [r, g, b] = [p[0], p[1], p[2]].map(|v| srgb_byte_to_linear(v) as f64);
+            sum += 0.2126 * r + 0.7152 * g + 0.0722 * b;
             n += 1;
         }
     }
