@@ -112,7 +112,7 @@ fn measure(
     out: &Path,
     format: Format,
 ) -> Result<Measured, String> {
-    let input = through(&input, format)?;
+    let input = through(input, format)?;
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
         relight(&input, model, target, format)?.into_iter().unzip();
     // The face measures look at the square the element relit.
