@@ -2,7 +2,7 @@
 
     python -m lsyd.evaluation.evaluate --data data --out results/paper \\
         --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
-        --no-delight runs/t-nodelight [--no-prediction runs/t-nopred] [--neither runs/t-neither]
+        [--no-delight runs/t-nodelight] [--no-prediction runs/t-nopred] [--neither runs/t-neither]
 
 - Table 1: relighting the held-out set (9 poses x 9 lights; every ordered pair of
   lights of a pose, 648 relightings over the paper's 324 pairs), ours with and
@@ -124,9 +124,9 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=Path("data"))
     p.add_argument("--out", type=Path, default=Path("results/paper"))
-    for name in ("ours", "sun", "sengupta", "no-delight"):
+    for name in ("ours", "sun", "sengupta"):
         p.add_argument(f"--{name}", type=Path, required=True)
-    for name in ("no-prediction", "neither"):
+    for name in ("no-delight", "no-prediction", "neither"):
         p.add_argument(f"--{name}", type=Path, default=None, help="a Table 3 cell; its row is left out without it")
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
@@ -155,7 +155,8 @@ def main() -> None:
     }
     if "neither" in nets:
         results["table3"]["no prediction, no de-lighting"] = held_row("neither", True)
-    results["table3"]["prediction, no de-lighting"] = held_row("no-delight", True)
+    if "no-delight" in nets:
+        results["table3"]["prediction, no de-lighting"] = held_row("no-delight", True)
     if "no-prediction" in nets:
         results["table3"]["no prediction, de-lighting"] = held_row("no-prediction", True)
     results["table3"]["prediction, de-lighting (ours)"] = ours_known
@@ -170,7 +171,6 @@ def main() -> None:
         return crops[r]
 
     ours, cfg = nets["ours"]
-    plain, plain_cfg = nets["no-delight"]
     rows2 = {
         "Sun et al. 2019": dict(net=nets["sun"][0], cfg=nets["sun"][1], alpha=1.0, beta=0.6, frames=1, known=True),
         "Sengupta et al. 2021": dict(
@@ -183,12 +183,14 @@ def main() -> None:
         "Ours + L_src avg": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=3, known=True),
         "Ours + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=1, known=True),
         "Ours + L_src avg + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=3, known=True),
-        # Without LCFN the skips carry the source light, so smoothing them smooths light too.
-        "No LCFN + L_src avg": dict(net=plain, cfg=plain_cfg, alpha=1.0, beta=0.6, frames=3, known=True),
-        "No LCFN + L_src avg + skip smoothing": dict(
-            net=plain, cfg=plain_cfg, alpha=0.7, beta=0.6, frames=3, known=True
-        ),
     }
+    if "no-delight" in nets:
+        plain, plain_cfg = nets["no-delight"]
+        # Without LCFN the skips carry the source light, so smoothing them smooths light too.
+        rows2["No LCFN + L_src avg"] = dict(net=plain, cfg=plain_cfg, alpha=1.0, beta=0.6, frames=3, known=True)
+        rows2["No LCFN + L_src avg + skip smoothing"] = dict(
+            net=plain, cfg=plain_cfg, alpha=0.7, beta=0.6, frames=3, known=True
+        )
     for name, kw in rows2.items():
         print(f"recordings: {name}", flush=True)
         results["table2"][name] = mean_over(recordings(kw["cfg"]), **kw)

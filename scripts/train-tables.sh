@@ -1,0 +1,62 @@
+#!/usr/bin/env bash
+# The paper's tables at a longer equal budget: ours, both baselines, the Table 3 ablations and
+# ours with the losses beyond the paper, each trained STEPS steps from scratch with the same
+# pipeline, data and seed as scripts/train-all.sh's 2000-step runs.
+#
+#   scripts/train-tables.sh STEPS [DATA] [RUNS]      (defaults: data runs/long-STEPS)
+#
+# With CUDA the runs train at once, one process each: the networks are small, so one run
+# leaves a GPU mostly idle. On a CPU they train one after another. Each run resumes from its
+# checkpoint if interrupted. PYTHON picks the interpreter (default .venv/bin/python).
+# Score them with lsyd.evaluation.evaluate (README, "The paper's tables").
+set -euo pipefail
+cd "$(dirname "$0")/.."
+steps=$1
+data=$(realpath -m "${2:-data}")
+runs=$(realpath -m "${3:-runs/long-$steps}")
+python=$(realpath -ms "${PYTHON:-.venv/bin/python}")
+[ -x "$python" ] || python=$(command -v "${PYTHON}")
+[ -d "$data/captures" ] || ./target/release/deskstage captures --out "$data/captures"
+mkdir -p "$runs"
+
+# Each session's frames at network resolution are cached next to it on first use; build the
+# caches once here so that parallel runs do not write them at the same time.
+(cd train && "$python" -c "
+import sys
+from pathlib import Path
+from lsyd import data, pairing
+pairs, _ = data.keypoint_pairs(Path(sys.argv[1]), 128, pairing.PairingRule())
+print(f'{len(pairs.pairs)} keypoint pairs at 128 px')
+" "$data/captures")
+
+declare -A variant=(
+  [t-lcfn]=""
+  [t-sun]="--arch sun"
+  [t-sengupta]="--arch sengupta"
+  [t-nodelight]="--no-delight"
+  [t-nopred]="--no-light-prediction"
+  [t-neither]="--no-delight --no-light-prediction"
+  [e-lcfn]="--delit-consistency 0.1 --monitor-colour 1.0"
+)
+parallel=$("$python" -c "import torch; print(int(torch.cuda.is_available()))")
+
+train() {
+  local name=$1
+  [ -f "$runs/$name/done" ] && return
+  local resume=()
+  [ -f "$runs/$name/checkpoint.pt" ] && resume=(--resume)
+  # shellcheck disable=SC2086 # the variant's flags are words
+  (cd train && "$python" -m lsyd.train --data "$data" --out "$runs/$name" --steps "$steps" \
+    --threads 2 --checkpoint-every 1000 ${variant[$name]} "${resume[@]}") >"$runs/$name.log" 2>&1
+  touch "$runs/$name/done"
+}
+
+for name in "${!variant[@]}"; do
+  if [ "$parallel" = 1 ]; then
+    train "$name" &
+  else
+    train "$name"
+  fi
+done
+wait
+grep -h "^trained" "$runs"/*.log
