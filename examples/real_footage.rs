@@ -112,9 +112,13 @@ fn measure(
     out: &Path,
     format: Format,
 ) -> Result<Measured, String> {
-    let input = through(input, format)?;
+    // The element is fed the frames converted once, and its output is
+    // compared with those frames converted back: feeding it frames that had
+    // already been round the trip would convert them twice, and the second
+    // round trip's loss (chroma filtered again) would count as its change.
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
         relight(&input, model, target, format)?.into_iter().unzip();
+    let input = through(input, format)?;
     // The face measures look at the square the element relit.
     let regions: Vec<Region> = regions
         .into_iter()
