@@ -8,7 +8,10 @@
 //!
 //! - luma: `Y' + p = ḡ (Y + p) + a_R (g_R − g_G)(Cr − 128) + a_B (g_B − g_G)(Cb − 128)`,
 //! - Cb: `Cb' − 128 = b_Y (g_B − ḡ)(Y + p) + (g_B − k_B (g_B − g_G))(Cb − 128)
-//!   − b_R (g_R − g_G)(Cr − 128)`, and Cr likewise.
+//!   − b_R (g_R − g_G)(Cr − 128)`, and Cr likewise,
+//!
+//! `a` and `b` constants of the matrix ([`YuvChange`]'s `luma_from_cr`,
+//! `luma_from_cb`, `cb_from_luma`, `cb_from_cr`).
 //!
 //! Each pixel's colour change is then the RGB path's, up to rounding: in
 //! particular the change of colour scales with the pixel's own brightness, so
