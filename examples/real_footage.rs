@@ -9,7 +9,10 @@
 //! ```
 //!
 //! `--format I420` feeds the element I420, as webcams deliver frames, and compares
-//! its output with the input after the same round trip through I420 and back.
+//! its output with the input after the same round trip through I420 and back;
+//! it also scores the element fed RGB with its output and input both sent
+//! round that trip: what the format itself does to the measures. Below the
+//! tables, for each clip, which input brightness the mottling comes from.
 //!
 //! The media come from packages, fetched by `scripts/setup.sh full` into
 //! `target/real-media` (never committed): scikit-image's `astronaut.png` (PyPI,
@@ -31,7 +34,10 @@ use lsydrelight_testkit::{
     flags::flag,
     footage::{Format, decode, read_y4m, relight, through},
     init,
-    quality::{BoxEdge, Region, box_edge, change_map, mean_level, mottling, pumping},
+    quality::{
+        BoxEdge, Region, box_edge, box_edge_score, change_map, mean_level, mottling,
+        mottling_by_luma, pumping,
+    },
     recording::ensure_recording,
 };
 
@@ -45,6 +51,12 @@ struct Measured {
     pumping: f64,
     /// Where the largest box edge is.
     worst: String,
+    /// Where the mottling comes from, by band of input luma ([`LUMA_BANDS`]).
+    mottling_sources: String,
+    /// Fed another format than RGB: the element fed RGB instead, its output
+    /// and its input both then round the trip through the format, scored the
+    /// same way: the largest box edge and the median mottling.
+    through_format: Option<(f64, f64)>,
     /// Against the ground truth, where there is one: RMSE (0-255) of the output
     /// over the relit square and over the whole frame, and the same for the input.
     truth: Option<[f64; 4]>,
@@ -67,6 +79,47 @@ fn rmse(a: &RgbImage, b: &RgbImage, region: Option<Region>) -> f64 {
         }
     }
     (sum / count.max(1) as f64).sqrt()
+}
+
+/// Edges, in levels of input luma, of the bands the mottling is broken down by.
+const LUMA_BANDS: [f64; 3] = [8.0, 16.0, 64.0];
+
+/// One frame's mottling, and per band of input luma its share of the square
+/// and of the mottling's sum of squares.
+type MottlingByLuma = (f64, Vec<(f64, f64)>);
+
+/// Per band of input luma (median over the frames): its share of the
+/// square, its share of the mottling's sum of squares and the mottling over
+/// its pixels alone.
+fn mottling_sources(input: &[RgbImage], output: &[RgbImage], regions: &[Region]) -> String {
+    let frames: Vec<MottlingByLuma> = input
+        .iter()
+        .zip(output)
+        .zip(regions)
+        .map(|((i, o), &r)| (mottling(i, o, r), mottling_by_luma(i, o, r, &LUMA_BANDS)))
+        .collect();
+    let of = |f: &dyn Fn(&MottlingByLuma) -> f64| median(frames.iter().map(f).collect());
+    let names = ["under 8", "8-16", "16-64", "64 up"];
+    let bands: Vec<String> = names
+        .iter()
+        .enumerate()
+        .map(|(b, name)| {
+            let rms = of(&|(m, bands)| {
+                let (pixels, sum) = bands[b];
+                if pixels > 0.0 {
+                    m * (sum / pixels).sqrt()
+                } else {
+                    0.0
+                }
+            });
+            format!(
+                "{name}: {:.0}% of the square, {:.0}% of the sum, {rms:.2}%",
+                100.0 * of(&|(_, bands)| bands[b].0),
+                100.0 * of(&|(_, bands)| bands[b].1),
+            )
+        })
+        .collect();
+    bands.join("; ")
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -112,9 +165,21 @@ fn measure(
     out: &Path,
     format: Format,
 ) -> Result<Measured, String> {
-    let input = through(input, format)?;
+    // The element is fed the frames converted once, and its output is
+    // compared with those frames converted back: feeding it frames that had
+    // already been round the trip would convert them twice, and the second
+    // round trip's loss (chroma filtered again) would count as its change.
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
         relight(&input, model, target, format)?.into_iter().unzip();
+    let through_format = if format == Format::Rgb {
+        None
+    } else {
+        let (relit, _): (Vec<RgbImage>, Vec<_>) = relight(&input, model, target, Format::Rgb)?
+            .into_iter()
+            .unzip();
+        Some((through(input.clone(), format)?, through(relit, format)?))
+    };
+    let input = through(input, format)?;
     // The face measures look at the square the element relit.
     let regions: Vec<Region> = regions
         .into_iter()
@@ -146,6 +211,15 @@ fn measure(
         .zip(&regions)
         .map(|((i, o), &r)| mottling(i, o, r))
         .collect();
+    let through_format = through_format.map(|(i, o)| {
+        let edge = i.iter().zip(&o).map(|(i, o)| box_edge_score(i, o));
+        let mottled = i
+            .iter()
+            .zip(&o)
+            .zip(&regions)
+            .map(|((i, o), &r)| mottling(i, o, r));
+        (edge.fold(0.0, f64::max), median(mottled.collect()))
+    });
     let means: Vec<(f64, f64)> = input
         .iter()
         .zip(&output)
@@ -170,6 +244,8 @@ fn measure(
     deskstage::io::write_png(&image, &change_map(&input[shown], &output[shown]))
         .map_err(|e| format!("{}: {e}", image.display()))?;
     Ok(Measured {
+        mottling_sources: mottling_sources(&input, &output, &regions),
+        through_format,
         worst,
         truth,
         name: name.to_string(),
@@ -179,6 +255,23 @@ fn measure(
         mottling_median: median(mottled),
         pumping: pumping(&means),
     })
+}
+
+/// What `real_footage` prints about a clip below its tables: where its
+/// mottling comes from, and fed another format, the RGB path's output through it.
+fn notes_of(m: &Measured, format: Format) -> Vec<String> {
+    let mut notes = vec![format!(
+        "{}: mottling by input luma (levels), median over the frames: {}",
+        m.name, m.mottling_sources
+    )];
+    if let Some((edge, mottled)) = m.through_format {
+        notes.push(format!(
+            "{}: the element fed RGB, its output and input both through {format:?}: \
+             box edge max {edge:.1}%, mottling median {mottled:.2}%",
+            m.name
+        ));
+    }
+    notes
 }
 
 fn main() -> Result<(), String> {
@@ -194,7 +287,7 @@ fn main() -> Result<(), String> {
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
-    let mut worst = Vec::new();
+    let (mut worst, mut notes) = (Vec::new(), Vec::new());
     println!(
         "| clip | frames | box edge max % | box edge median % | mottling median % | pumping (levels) |"
     );
@@ -221,6 +314,7 @@ fn main() -> Result<(), String> {
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
         );
         worst.push(format!("{}: largest box edge at {}", m.name, m.worst));
+        notes.extend(notes_of(&m, format));
     }
     // The simulator's recordings of its default person, relit to their own
     // sunset target, against their exact ground truth.
@@ -251,8 +345,9 @@ fn main() -> Result<(), String> {
             t[3]
         );
         worst.push(format!("{}: largest box edge at {}", m.name, m.worst));
+        notes.extend(notes_of(&m, format));
     }
-    for line in worst {
+    for line in worst.into_iter().chain(notes) {
         println!("{line}");
     }
     println!(

@@ -8,8 +8,9 @@
 //! upsampling to the frame. The frame keeps its own detail and takes its
 //! lighting from the network. The gain extends beyond the crop and fades out
 //! round the face ([`gain_field`]), so the change has no edge. YUV is an affine
-//! function of RGB, so the change runs on Y, U and V planes directly, as a gain
-//! and an offset per plane, and a YUV frame is never converted as a whole.
+//! function of RGB, so the per-channel gains are an affine map of each pixel's
+//! Y, U and V, applied to the planes directly: a YUV frame is never converted
+//! as a whole.
 
 /// Pixel layouts the element handles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -528,9 +529,6 @@ pub struct LightingChange {
     res: usize,
     /// Per channel (R, G, B), the log of the gain, smoothed, res × res.
     log_gain: [Vec<f32>; 3],
-    /// The network's input (sRGB in [0, 1]), lightly smoothed: what the gain
-    /// multiplies, to express a change of colour in Cb and Cr.
-    smooth_input: [Vec<f32>; 3],
 }
 
 impl LightingChange {
@@ -544,12 +542,9 @@ impl LightingChange {
         } else {
             (input.to_vec(), relit, res)
         };
-        let (input, relit, n) = (&input[..], &relit[..], res * res);
         LightingChange {
             res,
-            log_gain: smooth_log_gain(input, relit, res),
-            smooth_input: [0, 1, 2]
-                .map(|c| blur(&input[c * n..(c + 1) * n], res, SHADING_SMOOTHING)),
+            log_gain: smooth_log_gain(&input, &relit, res),
         }
     }
 

@@ -1,6 +1,7 @@
-//! The lighting change as a smooth gain field over the frame: per output
-//! channel a gain and an offset on a coarse grid round the face, bilinearly
-//! interpolated as the frame is pasted, `v ↦ g · v + o`.
+//! The lighting change as a smooth gain field over the frame: per RGB channel
+//! a gain on a coarse grid round the face, bilinearly interpolated as the
+//! frame is pasted, `(v' + ε) = g · (v + ε)`. YUV frames take the same change
+//! worked out on each pixel's own Y, Cb and Cr ([`yuv`]).
 //!
 //! The field holds the network's change (continued beyond the crop as it is at
 //! the crop's nearest point) faded out round the face: whole within a circle of
@@ -13,7 +14,10 @@
 //! grid row across the plane once per cell's worth of rows and then runs one
 //! multiply-add per byte, with no division or call in the loop.
 
+pub(super) mod yuv;
+
 use super::{Crop, FrameMut, LightingChange, PixelFormat, YuvMatrix, round_to_u8};
+use yuv::YuvChange;
 
 /// Grid cells across the crop's side. The change is blurred over nearly half
 /// the crop (`BRIGHTNESS_SMOOTHING`) and the fade spans half of it, so a cell
@@ -33,20 +37,17 @@ pub const INNER_RADIUS: f32 = 0.25;
 const LIFT: f32 = 2.0;
 
 /// The change on a grid of `columns` × `rows` cells, cell (0, 0)'s corner at
-/// `origin` in frame pixels, each `cell` frame pixels wide: per output channel
-/// (R, G, B or Y, Cb, Cr in 8-bit units) a gain and an offset.
+/// `origin` in frame pixels, each `cell` frame pixels wide: per RGB channel a
+/// gain.
 pub(super) struct GainField {
     columns: usize,
     rows: usize,
     origin: [f32; 2],
     cell: f32,
     gain: [Vec<f32>; 3],
-    offset: [Vec<f32>; 3],
-    /// Per channel, where the offset is tied to the gain: the value `p` with
-    /// `o = (g − 1) · p`, so the byte becomes `g · (v + p) − p` and the paste
-    /// reads one map instead of two (R, G, B and Y); None where the offset is
-    /// free (Cb, Cr).
-    pivot: [Option<f32>; 3],
+    /// For YUV frames: the change in Y'CbCr terms, and per cell the gain of
+    /// luma where the pixel has no colour (the luma-weighted mean of the three).
+    yuv: Option<(YuvChange, Vec<f32>)>,
     /// Per grid row, the first and last cell that changes anything; None when
     /// none does.
     spans: Vec<Option<(usize, usize)>>,
@@ -87,7 +88,8 @@ impl GainField {
         let strength = strength.clamp(0.0, 1.0);
         let cells = columns * rows;
         let mut gain = [0; 3].map(|_| vec![1f32; cells]);
-        let mut offset = [0; 3].map(|_| vec![0f32; cells]);
+        let yuv_change = format.is_yuv().then(|| YuvChange::new(matrix));
+        let mut luma_gain = vec![1f32; if format.is_yuv() { cells } else { 0 }];
         let mut spans = vec![None; rows];
         for (gy, row_span) in spans.iter_mut().enumerate() {
             for gx in 0..columns {
@@ -102,33 +104,27 @@ impl GainField {
                 }
                 // Where in the network's image: the crop's nearest point.
                 let u = [p[0] - crop.x as f32, p[1] - crop.y as f32].map(|v| v / side);
-                let log_gain = change
+                let g = change
                     .log_gain
                     .each_ref()
-                    .map(|g| weight * change.sample(g, u));
-                let input = change.smooth_input.each_ref().map(|i| change.sample(i, u));
-                let (g, o) = channel_gains(log_gain, input, format, matrix);
+                    .map(|g| (weight * change.sample(g, u)).exp());
                 let i = gy * columns + gx;
                 for c in 0..3 {
-                    (gain[c][i], offset[c][i]) = (g[c], o[c]);
+                    gain[c][i] = g[c];
+                }
+                if let Some(yuv) = &yuv_change {
+                    luma_gain[i] = yuv.luma_gain(g);
                 }
                 *row_span = Some(row_span.map_or((gx, gx), |(first, _)| (first, gx)));
             }
         }
-        let pivot = if format.is_yuv() {
-            let (luma_offset, luma_scale, _) = matrix.scales();
-            [Some(luma_scale * LIFT / 255.0 - luma_offset), None, None]
-        } else {
-            [Some(LIFT); 3]
-        };
         GainField {
             columns,
             rows,
             origin,
             cell,
             gain,
-            offset,
-            pivot,
+            yuv: yuv_change.map(|y| (y, luma_gain)),
             spans,
         }
     }
@@ -151,6 +147,9 @@ impl GainField {
 
     /// Applies the field to `frame`.
     pub(super) fn paste(&self, frame: &mut FrameMut) {
+        if let Some((yuv, luma_gain)) = &self.yuv {
+            return self.paste_yuv(yuv, luma_gain, frame);
+        }
         let size = (frame.width, frame.height);
         for pass in frame.format.passes() {
             let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
@@ -206,14 +205,6 @@ impl GainField {
             return;
         };
         let taps_x = &taps_x[first..end];
-        // Whether every channel of the plane's lanes has its offset tied to
-        // its gain, about one pivot.
-        let pivots: Vec<Option<f32>> = lanes.iter().flatten().map(|&c| self.pivot[c]).collect();
-        let pivot = pivots
-            .iter()
-            .all(|p| p.is_some() && *p == pivots[0])
-            .then(|| pivots[0])
-            .flatten();
         let mut rows = FieldRows::new(taps_x.len() * BPP);
         let dithers = dither_rows(first, taps_x.len(), BPP);
         for (y, &(ly, ty)) in taps_y.iter().enumerate() {
@@ -227,29 +218,19 @@ impl GainField {
                 &mut data[start + lanes.start..start + lanes.end],
                 &dithers[y % DITHER][lanes.clone()],
             );
-            match pivot {
-                Some(pivot) => gain_row(
-                    row,
-                    ty,
-                    (&top.gain[lanes.clone()], &bottom.gain[lanes]),
-                    pivot,
-                    dither,
-                ),
-                None => blend_row(
-                    row,
-                    ty,
-                    (&top.gain[lanes.clone()], &top.offset[lanes.clone()]),
-                    (&bottom.gain[lanes.clone()], &bottom.offset[lanes]),
-                    dither,
-                ),
-            }
+            gain_row(
+                row,
+                ty,
+                (&top.gain[lanes.clone()], &bottom.gain[lanes]),
+                LIFT,
+                dither,
+            );
         }
     }
 
     /// Grid row `r` interpolated across the plane's columns (taps `taps`) at
     /// every lane: the horizontal half of the bilinear upsampling. Padding
-    /// lanes keep a gain of 1 and an offset of 0, which leave their bytes as
-    /// they are.
+    /// lanes keep a gain of 1, which leaves their bytes as they are.
     fn interpolate_row<const BPP: usize>(
         &self,
         r: usize,
@@ -257,48 +238,53 @@ impl GainField {
         taps: &[(usize, f32)],
         out: &mut FieldRow,
     ) {
-        let row = r * self.columns..(r + 1) * self.columns;
         // A lane at a time, so the loop over the taps has no branch.
         for (lane, channel) in lanes.iter().enumerate() {
-            let Some(c) = *channel else {
-                continue;
-            };
-            let offset = self.pivot[c]
-                .is_none()
-                .then(|| (&self.offset[c][row.clone()], &mut out.offset));
-            let gain = (&self.gain[c][row.clone()], &mut out.gain);
-            for (m, out) in std::iter::once(gain).chain(offset) {
-                for (&(lx, tx), o) in taps.iter().zip(out.iter_mut().skip(lane).step_by(BPP)) {
-                    *o = m[lx] + (m[lx + 1] - m[lx]) * tx;
-                }
+            if let Some(c) = *channel {
+                let out = out.gain.iter_mut().skip(lane).step_by(BPP);
+                self.interpolate_map_row(&self.gain[c], r, taps, out);
             }
         }
     }
 
-    /// Byte `v` of channel `c` at a pixel with taps `x` and `y` (from
+    /// Row `r` of `map` (a grid of the field's cells) interpolated at `taps`
+    /// into `out`.
+    fn interpolate_map_row<'a>(
+        &self,
+        map: &[f32],
+        r: usize,
+        taps: &[(usize, f32)],
+        out: impl Iterator<Item = &'a mut f32>,
+    ) {
+        let m = &map[r * self.columns..(r + 1) * self.columns];
+        for (&(lx, tx), o) in taps.iter().zip(out) {
+            *o = m[lx] + (m[lx + 1] - m[lx]) * tx;
+        }
+    }
+
+    /// `map` (a grid of the field's cells) at taps `x` and `y` (from
+    /// [`GainField::taps`]), in exactly the operations of the paste.
+    #[cfg(test)]
+    pub(super) fn sample(
+        &self,
+        map: &[f32],
+        (lx, tx): (usize, f32),
+        (ly, ty): (usize, f32),
+    ) -> f32 {
+        let row = |r: usize| {
+            let m = &map[r * self.columns..(r + 1) * self.columns];
+            m[lx] + (m[lx + 1] - m[lx]) * tx
+        };
+        row(ly) * (1.0 - ty) + row(ly + 1) * ty
+    }
+
+    /// Byte `v` of RGB channel `c` at a pixel with taps `x` and `y` (from
     /// [`GainField::taps`]) and dither `dither`, relit: the field sampled on
     /// its own, for the reference paste.
     #[cfg(test)]
-    pub(super) fn at(
-        &self,
-        c: usize,
-        v: u8,
-        (lx, tx): (usize, f32),
-        (ly, ty): (usize, f32),
-        dither: f32,
-    ) -> f32 {
-        let sample = |map: &[f32]| {
-            let row = |r: usize| {
-                let m = &map[r * self.columns..(r + 1) * self.columns];
-                m[lx] + (m[lx + 1] - m[lx]) * tx
-            };
-            row(ly) * (1.0 - ty) + row(ly + 1) * ty
-        };
-        let gain = sample(&self.gain[c]);
-        match self.pivot[c] {
-            Some(p) => gain * (v as f32 + p) - p + dither,
-            None => gain * v as f32 + sample(&self.offset[c]) + dither,
-        }
+    pub(super) fn at(&self, c: usize, v: u8, x: (usize, f32), y: (usize, f32), dither: f32) -> f32 {
+        let gain = self.sample(&self.gain[c], x, y);
+        gain * (v as f32 + LIFT) - LIFT + dither
     }
 }
 
@@ -316,48 +302,9 @@ fn fade(distance: f32, feather: f32) -> f32 {
     t * t * (3.0 - 2.0 * t)
 }
 
-/// Per output channel, the gain and offset that per-channel RGB log gains
-/// `log_gain` make of a pixel, for a frame of `format`; `input` is the smooth
-/// network input there (sRGB in [0, 1]).
-///
-/// In RGB each channel takes its own gain: the change's colour is then the
-/// same ratio of channels on every pixel, so skin texture does not turn into
-/// colour blotches. In YUV a per-channel gain would mix the planes, so luma
-/// takes the luma-weighted mean gain `g_Y` and a colour difference `B − Y`
-/// becomes `g_Y (B − Y) + (g_B − g_Y)(I_B + ε)`: the change's colour as an
-/// offset of the chroma planes, taken from the smooth input.
-fn channel_gains(
-    log_gain: [f32; 3],
-    input: [f32; 3],
-    format: PixelFormat,
-    matrix: YuvMatrix,
-) -> ([f32; 3], [f32; 3]) {
-    let rgb_gain = log_gain.map(f32::exp);
-    if !format.is_yuv() {
-        return (rgb_gain, rgb_gain.map(|g| (g - 1.0) * LIFT));
-    }
-    let (kr, kb) = (matrix.kr, matrix.kb);
-    let k = [kr, 1.0 - kr - kb, kb];
-    let lifted = input.map(|i| i.max(0.0) + LIFT / 255.0);
-    let luma: f32 = (0..3).map(|c| k[c] * lifted[c]).sum();
-    let g = (0..3).map(|c| k[c] * rgb_gain[c] * lifted[c]).sum::<f32>() / luma;
-    let (luma_offset, luma_scale, chroma_scale) = matrix.scales();
-    let shift =
-        |c: usize, kc: f32| chroma_scale / (2.0 * (1.0 - kc)) * (rgb_gain[c] - g) * lifted[c];
-    (
-        [g; 3],
-        [
-            (g - 1.0) * (luma_scale * LIFT / 255.0 - luma_offset),
-            128.0 * (1.0 - g) + shift(2, kb),
-            128.0 * (1.0 - g) + shift(0, kr),
-        ],
-    )
-}
-
-/// A grid row interpolated to every lane of a plane row: gains and offsets.
+/// A grid row interpolated to every lane of a plane row: the gains.
 struct FieldRow {
     gain: Vec<f32>,
-    offset: Vec<f32>,
 }
 
 /// Two consecutive `FieldRow`s, kept while the plane rows they serve (about a
@@ -370,9 +317,8 @@ struct FieldRows {
 impl FieldRows {
     fn new(lanes: usize) -> FieldRows {
         let row = || FieldRow {
-            // Padding lanes keep a gain of 1 and an offset of 0.
+            // Padding lanes keep a gain of 1.
             gain: vec![1.0; lanes],
-            offset: vec![0.0; lanes],
         };
         FieldRows {
             held: [None; 2],
@@ -392,66 +338,9 @@ impl FieldRows {
     }
 }
 
-/// Blends one row of lanes: the vertical half of the bilinear upsampling, then
-/// `g · v + o` dithered ([`dither`]) and rounded, in exactly the operations of
-/// [`GainField::at`] so the bytes do not change.
-pub(super) fn blend_row(
-    row: &mut [u8],
-    ty: f32,
-    top: (&[f32], &[f32]),
-    bottom: (&[f32], &[f32]),
-    dither: &[f32],
-) {
-    // AVX2, where the CPU has it, doubles the vectors' width. The results are
-    // the same, as both builds run the same IEEE operations in the same order
-    // (Rust never fuses a multiply and an add on its own).
-    #[cfg(target_arch = "x86_64")]
-    if std::arch::is_x86_feature_detected!("avx2") {
-        // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { blend_row_avx2(row, ty, top, bottom, dither) };
-    }
-    blend_row_portable(row, ty, top, bottom, dither)
-}
-
-/// `blend_row_portable` built for AVX2.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
-fn blend_row_avx2(
-    row: &mut [u8],
-    ty: f32,
-    top: (&[f32], &[f32]),
-    bottom: (&[f32], &[f32]),
-    dither: &[f32],
-) {
-    blend_row_portable(row, ty, top, bottom, dither)
-}
-
-// Always inlined, so that `blend_row_avx2` holds a copy built for AVX2.
-#[inline(always)]
-pub(super) fn blend_row_portable(
-    row: &mut [u8],
-    ty: f32,
-    top: (&[f32], &[f32]),
-    bottom: (&[f32], &[f32]),
-    dither: &[f32],
-) {
-    let uy = 1.0 - ty;
-    // Equal lengths up front let the compiler drop the bounds checks.
-    let n = row.len();
-    let (top_gain, top_offset) = (&top.0[..n], &top.1[..n]);
-    let (bottom_gain, bottom_offset) = (&bottom.0[..n], &bottom.1[..n]);
-    let dither = &dither[..n];
-    for k in 0..n {
-        let gain = top_gain[k] * uy + bottom_gain[k] * ty;
-        let offset = top_offset[k] * uy + bottom_offset[k] * ty;
-        row[k] = round_to_u8(gain * row[k] as f32 + offset + dither[k]);
-    }
-}
-
-/// Relights one row of lanes whose offset is tied to their gain: the vertical
-/// half of the bilinear upsampling of the gain, then `g · (v + p) − p`
-/// dithered ([`dither`]) and rounded, in exactly the operations of
-/// [`GainField::at`]. Half the maps of [`blend_row`] to read and interpolate.
+/// Relights one row of lanes: the vertical half of the bilinear upsampling of
+/// the gain, then `g · (v + p) − p` dithered ([`dither`], or any other
+/// addition) and rounded, in exactly the operations of [`GainField::at`].
 pub(super) fn gain_row(
     row: &mut [u8],
     ty: f32,
@@ -459,6 +348,9 @@ pub(super) fn gain_row(
     pivot: f32,
     dither: &[f32],
 ) {
+    // AVX2, where the CPU has it, doubles the vectors' width. The results are
+    // the same, as both builds run the same IEEE operations in the same order
+    // (Rust never fuses a multiply and an add on its own).
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.

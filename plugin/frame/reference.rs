@@ -128,20 +128,58 @@ pub fn apply(change: &LightingChange, frame: &mut FrameMut, crop: Crop, feather:
                 apply_channel(&field, (data, stride, offset, bpp), (width, height), c, 1);
             }
         }
-        None => {
-            let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
-            apply_channel(&field, (data, stride, 0, 1), (width, height), 0, 1);
-            let (sub, places) = chroma(frame.format);
-            let size = (width.div_ceil(sub), height.div_ceil(sub));
-            for (k, (plane, offset, step)) in places.into_iter().enumerate() {
-                let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
-                apply_channel(&field, (data, stride, offset, step), size, k + 1, sub);
+        None => apply_yuv(&field, frame),
+    }
+}
+
+/// The paste on a YUV frame: first every chroma sample's change, from the
+/// frame as it is (its pixels' mean luma, its Cb and Cr); then the new Cb and
+/// Cr, rounded; then every luma byte, with its chroma sample's term, dithered.
+fn apply_yuv(field: &GainField, frame: &mut FrameMut) {
+    let (width, height) = (frame.width, frame.height);
+    let (sub, places) = chroma(frame.format);
+    let (cw, ch) = (width.div_ceil(sub), height.div_ceil(sub));
+    let (taps_x, taps_y) = (field.taps(cw, sub, 0), field.taps(ch, sub, 1));
+    let mut changes = Vec::with_capacity(cw * ch);
+    for cy in 0..ch {
+        for cx in 0..cw {
+            let (luma, stride) = (&frame.planes[0].0, frame.planes[0].1);
+            let (mut sum, mut count) = (0u16, 0);
+            for y in sub * cy..(sub * cy + sub).min(height) {
+                for x in sub * cx..(sub * cx + sub).min(width) {
+                    sum += u16::from(luma[y * stride + x]);
+                    count += 1;
+                }
             }
+            let byte = |(plane, offset, step): (usize, usize, usize)| {
+                let (data, stride) = (&frame.planes[plane].0, frame.planes[plane].1);
+                data[cy * stride + cx * step + offset]
+            };
+            let chroma = (byte(places[0]), byte(places[1]));
+            changes.push(field.chroma_at(taps_x[cx], taps_y[cy], (sum, count), chroma));
+        }
+    }
+    for (k, (plane, offset, step)) in places.into_iter().enumerate() {
+        let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
+        for cy in 0..ch {
+            for cx in 0..cw {
+                let value = changes[cy * cw + cx][k + 1];
+                data[cy * stride + cx * step + offset] = value.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    let (taps_x, taps_y) = (field.taps(width, 1, 0), field.taps(height, 1, 1));
+    let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
+    for (y, &ty) in taps_y.iter().enumerate() {
+        for (x, &tx) in taps_x.iter().enumerate() {
+            let extra = changes[(y / sub) * cw + x / sub][0] + dither(x, y);
+            let value = field.luma_at(data[y * stride + x], tx, ty, extra);
+            data[y * stride + x] = value.round().clamp(0.0, 255.0) as u8;
         }
     }
 }
 
-/// Applies channel `channel` of `field` to the samples of one plane (its
+/// Applies RGB channel `channel` of `field` to the samples of one plane (its
 /// bytes, stride, the channel's byte offset and bytes between samples), a
 /// plane of `width` × `height` samples each `subsample` frame pixels wide.
 fn apply_channel(

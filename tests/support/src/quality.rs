@@ -6,7 +6,8 @@
 //!   the frame height, in percent: the visible edge of a relit box.
 //! - [`mottling`]: the colour part of the per-channel log gain (log gain less its
 //!   mean over the channels), less its smooth part (a box blur a quarter of the
-//!   face wide), as RMS in percent over the face: blotchy skin.
+//!   face wide), as RMS in percent over the face: blotchy skin;
+//!   [`mottling_by_luma`] says which input brightness it comes from.
 //! - [`pumping`]: the 95th percentile of the frame-to-frame change of the face
 //!   region's mean (output minus input), in levels, leaving out cuts: brightness
 //!   that breathes while the input is steady.
@@ -171,27 +172,64 @@ fn coherent_step(
 
 /// Mottling of a relit frame against its input over `face`, in percent.
 pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
+    let terms = mottling_terms(input, output, face);
+    let sum: f64 = terms.iter().map(|(_, t)| t).sum();
+    100.0 * (sum / (3 * terms.len()).max(1) as f64).sqrt()
+}
+
+/// Where a frame's mottling comes from: per band of the input's luma (in
+/// levels, `edges` rising: below the first, between each two, from the last
+/// up), the band's share of the pixels of `face` and of the mottling's sum of
+/// squares, both in [0, 1].
+pub fn mottling_by_luma(
+    input: &RgbImage,
+    output: &RgbImage,
+    face: Region,
+    edges: &[f64],
+) -> Vec<(f64, f64)> {
+    let terms = mottling_terms(input, output, face);
+    let mut bands = vec![(0.0, 0.0); edges.len() + 1];
+    for &(i, t) in &terms {
+        let level = 255.0 * luma(&input.data[3 * i..3 * i + 3]);
+        let band = edges.partition_point(|&e| e <= level);
+        bands[band].0 += 1.0;
+        bands[band].1 += t;
+    }
+    let (count, sum) = (
+        terms.len().max(1) as f64,
+        terms.iter().map(|(_, t)| t).sum::<f64>(),
+    );
+    bands
+        .into_iter()
+        .map(|(n, t)| (n / count, if sum > 0.0 { t / sum } else { 0.0 }))
+        .collect()
+}
+
+/// Per pixel of `face` (its index in the image): the squares, summed over
+/// the channels, of the colour part of its per-channel log gain (the
+/// channel's less the mean of the three) less that part's smooth part (a box
+/// blur a quarter of the face wide).
+fn mottling_terms(input: &RgbImage, output: &RgbImage, face: Region) -> Vec<(usize, f64)> {
     let (w, h) = (input.width, input.height);
     let channel_gain = |c: usize| log_ratio(input, output, |p| p[c] as f64 / 255.0);
     let gains = [channel_gain(0), channel_gain(1), channel_gain(2)];
     let radius = (face.size / 8).max(1);
-    let mut sum = 0.0;
-    let mut count = 0usize;
+    let pixels: Vec<usize> = (face.y..(face.y + face.size).min(h))
+        .flat_map(|y| (face.x..(face.x + face.size).min(w)).map(move |x| y * w + x))
+        .collect();
+    let mut terms: Vec<(usize, f64)> = pixels.iter().map(|&i| (i, 0.0)).collect();
     for gain in &gains {
         // The colour part: this channel's gain less the mean gain of the three.
         let colour: Vec<f64> = (0..w * h)
             .map(|i| gain[i] - (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
             .collect();
         let smooth = box_blur(&colour, w, h, radius);
-        for y in face.y..(face.y + face.size).min(h) {
-            for x in face.x..(face.x + face.size).min(w) {
-                let d = colour[y * w + x] - smooth[y * w + x];
-                sum += d * d;
-                count += 1;
-            }
+        for (i, t) in &mut terms {
+            let d = colour[*i] - smooth[*i];
+            *t += d * d;
         }
     }
-    100.0 * (sum / count.max(1) as f64).sqrt()
+    terms
 }
 
 /// A change of the input's face-region mean, in levels, that counts as a cut.
@@ -280,6 +318,10 @@ mod tests {
         });
         assert!(mottling(&input, &tinted, face) < 0.5);
         assert!(mottling(&input, &blotched, face) > 5.0);
+        // All of it from the one band the face's pixels lie in.
+        let bands = mottling_by_luma(&input, &blotched, face, &[16.0, 64.0, 200.0]);
+        assert_eq!(bands.len(), 4);
+        assert_eq!(bands[2], (1.0, 1.0));
     }
 
     #[test]
