@@ -11,7 +11,7 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 from skimage import data as skdata
 
-from lsyd import contract, data, export, optimise
+from lsyd import contract, data, export, optimise, variants
 from lsyd.evaluation import benchmark
 
 
@@ -147,10 +147,16 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
     assert max(diffs.values()) <= optimise.TOLERANCE
 
 
-def test_network_timings_compare_the_rewrite_and_the_peer_in_one_run(shipped_model):
-    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1)
-    for name in ("onnxruntime", "onnxruntime, not rewritten", "pytorch"):
+def test_network_timings_compare_the_rewrite_int8_and_the_peer_in_one_run(shipped_model, tmp_path):
+    # The shipped model's int8 variant, calibrated on one frame: the benchmark only times it.
+    image, source, target = real_frame(contract.read(shipped_model / "model.json")["resolution"])
+    variants.to_int8(shipped_model, tmp_path, variants.chain_inputs(shipped_model, image, source))
+    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1, int8=tmp_path)
+    for name in ("onnxruntime", "onnxruntime, int8", "onnxruntime, not rewritten", "pytorch"):
         t = timings[name]["1"]
         assert 0 < t["min"] <= t["median"] <= t["max"], name
-    assert timings["peer_ratio"]["1"] > 0
-    assert "| 1 |" in benchmark.network_table(timings)
+        assert 0 < t["cpu"]["min"] <= t["cpu"]["median"] <= t["cpu"]["max"], name
+    assert timings["peer_ratio"]["1"] > 0 and timings["peer_ratio_int8"]["1"] > 0
+    table = benchmark.network_table(timings)
+    assert "ONNX Runtime, int8" in table and "peer / ONNX Runtime, int8" in table
+    assert table.count("| 1 |") == 2, "a wall-time row and a CPU-time row"
