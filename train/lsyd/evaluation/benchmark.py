@@ -244,6 +244,64 @@ def network_table(timings: dict) -> str:
     return "\n".join(rows) + "\n"
 
 
+def stage_timings(folders: dict[str, Path], threads: int = 1, rounds: int = 8, frames: int = 20) -> dict:
+    """CPU milliseconds a run of each stage of each model folder (say fp32 and its int8 variant),
+    interleaved round by round, median (min-max): which stages a variant makes cheaper. Each
+    stage is fed what it gets when a random frame is relit (``StageChain.stage_inputs``)."""
+    rng = np.random.default_rng(0)
+    chains = {k: contract.StageChain(f, threads) for k, f in folders.items()}
+    r = next(iter(chains.values())).resolution
+    image = rng.random((1, 3, r, r), dtype=np.float32)
+    light = rng.random((1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS), dtype=np.float32)
+    feeds = {k: c.stage_inputs(image, light, light) for k, c in chains.items()}
+    cpu: dict[str, dict[str, list[float]]] = {s: {k: [] for k in chains} for s in contract.STAGES}
+    for _ in range(rounds):
+        for k, c in chains.items():
+            for stage, feed in feeds[k].items():
+                session = c.sessions[stage]
+                for _ in range(3):
+                    session.run(None, feed)
+                t = time.process_time()
+                for _ in range(frames):
+                    session.run(None, feed)
+                cpu[stage][k].append(1e3 * (time.process_time() - t) / frames)
+    return {
+        s: {k: {"median": float(np.median(v)), "min": min(v), "max": max(v)} for k, v in d.items()}
+        for s, d in cpu.items()
+    }
+
+
+def network_after_traffic(
+    folder: Path, sizes_mb: tuple[int, ...] = (0, 1, 4, 12, 32, 64), threads: int = 2, rounds: int = 10
+) -> dict[int, dict]:
+    """Wall milliseconds of the network (``StageChain``, known source) on frames after which
+    the calling thread copies ``sizes_mb`` megabytes, as the element's conversion, crop and
+    paste of a bigger video frame stream through memory between two network runs: whether
+    the network's time depends on the cache it finds. Sizes interleaved round by round; each
+    round's median of 15 frames, then median (min-max) over rounds."""
+    chain = contract.StageChain(folder, threads)
+    rng = np.random.default_rng(0)
+    r = chain.resolution
+    image = rng.random((1, 3, r, r), dtype=np.float32)
+    light = rng.random((1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS), dtype=np.float32)
+    code = chain.light_code(light)
+    src = np.ones(max(sizes_mb) << 20, np.uint8)
+    dst = np.empty_like(src)
+    out: dict[int, list[float]] = {s: [] for s in sizes_mb}
+    for i in range(rounds):
+        k = i % len(sizes_mb)
+        for size in sizes_mb[k:] + sizes_mb[:k]:
+            ms = []
+            for frame in range(18):
+                np.copyto(dst[: size << 20], src[: size << 20])
+                t = time.perf_counter()
+                chain.relight(image, light, code)
+                if frame >= 3:
+                    ms.append(1e3 * (time.perf_counter() - t))
+            out[size].append(float(np.median(ms)))
+    return {s: {"median": float(np.median(v)), "min": min(v), "max": max(v)} for s, v in out.items()}
+
+
 def sustained_gflops(threads: int) -> float:
     """GFLOP/s of ONNX Runtime on a stack of 3x3 convolutions like the network's (32 channels, 64x64)."""
     c, hw, depth = 32, 64, 8
@@ -470,9 +528,10 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument(
         "stage",
-        choices=["export", "report", "network", "skips"],
-        help="network: the network alone against PyTorch; skips: only the skip table, "
-        "from the element's run alone (`--group skip`)",
+        choices=["export", "report", "network", "stages", "traffic", "skips"],
+        help="network: the network alone against PyTorch; stages: CPU time of each stage of --model "
+        "and --int8; traffic: the network's time after memory traffic between frames; skips: only the "
+        "skip table, from the element's run alone (`--group skip`)",
     )
     p.add_argument("--data", type=Path, default=ROOT / "data")
     p.add_argument("--runs", type=Path, default=ROOT / "runs")
@@ -484,6 +543,16 @@ def main() -> None:
         export_all(a.data, a.runs)
     elif a.stage == "report":
         report(a.data, a.out)
+    elif a.stage == "stages":
+        folders = {"fp32": a.model, **({"int8": a.int8} if a.int8 else {})}
+        for stage, by in stage_timings(folders).items():
+            cells = ", ".join(f"{k} {v['median']:.3f} ({v['min']:.3f}-{v['max']:.3f})" for k, v in by.items())
+            print(f"{stage}: {cells} CPU ms a run, 1 thread")
+    elif a.stage == "traffic":
+        load = os.getloadavg()[0]
+        for size, v in network_after_traffic(a.model).items():
+            print(f"{size} MB copied before each frame: {v['median']:.2f} ({v['min']:.2f}-{v['max']:.2f}) ms")
+        print(f"one-minute load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
     elif a.stage == "skips":
         element = json.loads((a.out / "element.json").read_text())
         rows = [{**r["variant"], "recordings": r["recordings"]} for r in element]
