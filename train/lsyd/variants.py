@@ -1,11 +1,15 @@
 """Lower-precision variants of an exported model: fp16 weights and int8 quantisation.
 
     python -m lsyd.variants --model models/default --data data --out target/bench-models
+    python -m lsyd.variants --model models/starter --data data/starter --out target/variants \
+        --no-fp16 [--int8-stages delight decoder] --heldout data/starter/unseen/person-200 ...
 
 Both keep the contract's float32 inputs and outputs, so the element runs them
 unchanged. fp16 stores weights and computes in half precision where ONNX
 Runtime supports it; int8 is static QDQ quantisation (per-channel weights,
-activations calibrated on training frames, never on the held-out set).
+activations calibrated on training frames, never on the held-out set), of every stage or
+of the ones named; ``--heldout`` scores fp32 and int8 on held-out sets and records both in
+the int8 manifest's ``metrics.heldout_rmse``.
 """
 
 from __future__ import annotations

@@ -160,3 +160,13 @@ def test_network_timings_compare_the_rewrite_int8_and_the_peer_in_one_run(shippe
     table = benchmark.network_table(timings)
     assert "ONNX Runtime, int8" in table and "peer / ONNX Runtime, int8" in table
     assert table.count("| 1 |") == 2, "a wall-time row and a CPU-time row"
+
+
+def test_stage_and_traffic_timings_cover_every_stage_and_size(shipped_model):
+    by_stage = benchmark.stage_timings({"fp32": shipped_model}, rounds=1, frames=1)
+    assert list(by_stage) == list(contract.STAGES)
+    for stage, t in by_stage.items():
+        assert 0 <= t["fp32"]["min"] <= t["fp32"]["median"] <= t["fp32"]["max"], stage
+    after = benchmark.network_after_traffic(shipped_model, sizes_mb=(0, 1), threads=1, rounds=2)
+    assert list(after) == [0, 1]
+    assert all(0 < t["min"] <= t["median"] <= t["max"] for t in after.values())
