@@ -11,7 +11,7 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 from skimage import data as skdata
 
-from lsyd import contract, data, export, optimise
+from lsyd import contract, data, export, optimise, variants
 from lsyd.evaluation import benchmark
 
 
@@ -147,10 +147,26 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
     assert max(diffs.values()) <= optimise.TOLERANCE
 
 
-def test_network_timings_compare_the_rewrite_and_the_peer_in_one_run(shipped_model):
-    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1)
-    for name in ("onnxruntime", "onnxruntime, not rewritten", "pytorch"):
+def test_network_timings_compare_the_rewrite_int8_and_the_peer_in_one_run(shipped_model, tmp_path):
+    # The shipped model's int8 variant, calibrated on one frame: the benchmark only times it.
+    image, source, target = real_frame(contract.read(shipped_model / "model.json")["resolution"])
+    variants.to_int8(shipped_model, tmp_path, variants.chain_inputs(shipped_model, image, source))
+    timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1, int8=tmp_path)
+    for name in ("onnxruntime", "onnxruntime, int8", "onnxruntime, not rewritten", "pytorch"):
         t = timings[name]["1"]
         assert 0 < t["min"] <= t["median"] <= t["max"], name
-    assert timings["peer_ratio"]["1"] > 0
-    assert "| 1 |" in benchmark.network_table(timings)
+        assert 0 < t["cpu"]["min"] <= t["cpu"]["median"] <= t["cpu"]["max"], name
+    assert timings["peer_ratio"]["1"] > 0 and timings["peer_ratio_int8"]["1"] > 0
+    table = benchmark.network_table(timings)
+    assert "ONNX Runtime, int8" in table and "peer / ONNX Runtime, int8" in table
+    assert table.count("| 1 |") == 2, "a wall-time row and a CPU-time row"
+
+
+def test_stage_and_traffic_timings_cover_every_stage_and_size(shipped_model):
+    by_stage = benchmark.stage_timings({"fp32": shipped_model}, rounds=1, frames=1)
+    assert list(by_stage) == list(contract.STAGES)
+    for stage, t in by_stage.items():
+        assert 0 <= t["fp32"]["min"] <= t["fp32"]["median"] <= t["fp32"]["max"], stage
+    after = benchmark.network_after_traffic(shipped_model, sizes_mb=(0, 1), threads=1, rounds=2)
+    assert list(after) == [0, 1]
+    assert all(0 < t["min"] <= t["median"] <= t["max"] for t in after.values())

@@ -2,8 +2,11 @@
 error bounds ``variants.ERROR_BOUNDS`` states against fp32."""
 
 import numpy as np
+import onnx
+import pytest
+import torch
 
-from lsyd import contract, data, variants
+from lsyd import contract, data, export, variants
 
 
 def relight_all(folder, images: np.ndarray, lights: np.ndarray) -> np.ndarray:
@@ -47,3 +50,44 @@ def test_fp16_and_int8_stay_finite_and_close_to_fp32(sim_data, shipped_model, tm
         assert err.max() <= max_bound, f"{precision}: max error {err.max():.4f} > {max_bound}"
         extreme = relight_all(tmp_path / precision, extreme_faces, extreme_lights)
         assert np.isfinite(extreme).all(), f"{precision}: NaN or Inf on extreme inputs"
+
+
+def stage_tensors(path) -> list[list[tuple]]:
+    """A stage file's inputs and outputs: name, shape, dtype."""
+    model = onnx.load(path)
+
+    def spec(v):
+        t = v.type.tensor_type
+        return v.name, [d.dim_value for d in t.shape.dim], onnx.helper.tensor_dtype_to_np_dtype(t.elem_type).name
+
+    return [[spec(v) for v in model.graph.input], [spec(v) for v in model.graph.output]]
+
+
+def test_int8_of_chosen_stages_keeps_the_contract_and_the_other_stages(sim_data, shipped_model, tmp_path):
+    res = contract.read(shipped_model / "model.json")["resolution"]
+    images, lights = variants.calibration_frames(sim_data, res, count=4)
+    chosen = ("delight", "decoder")
+    variants.to_int8(shipped_model, tmp_path, variants.chain_inputs(shipped_model, images, lights), chosen)
+    m = contract.read(tmp_path / "model.json")
+    assert m["precision"] == "int8"
+    for stage in contract.STAGES:
+        spec = m["stages"][stage]
+        # What the element checks on load (plugin/engine/contract.rs): names, shapes, dtypes.
+        want = [[(t["name"], t["shape"], t["dtype"]) for t in spec[k]] for k in ("inputs", "outputs")]
+        assert stage_tensors(tmp_path / spec["file"]) == want, stage
+        ops = {n.op_type for n in onnx.load(tmp_path / spec["file"]).graph.node}
+        original = (shipped_model / spec["file"]).read_bytes()
+        if stage in chosen:
+            assert "QuantizeLinear" in ops, f"{stage} was not quantised"
+        else:
+            assert (tmp_path / spec["file"]).read_bytes() == original, f"{stage} changed"
+    # The benchmark's check of a variant it times: close to the fp32 network, and refused when not.
+    net = export.network_from_model(shipped_model)
+    gen = torch.Generator().manual_seed(0)
+    image = torch.rand(1, 3, res, res, generator=gen)
+    source, target = torch.rand(2, 1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS, generator=gen)
+    ref = export.reference_run(net, image, source, target)
+    assert variants.check_close(tmp_path, ref, "int8") <= variants.ERROR_BOUNDS["int8"][0]
+    ref["relit"] = 1.0 - ref["relit"]
+    with pytest.raises(ValueError, match="int8 variant relights"):
+        variants.check_close(tmp_path, ref, "int8")

@@ -65,15 +65,18 @@ def export_all(data_root: Path, runs: Path) -> None:
     variants.to_int8(default, BENCH / "default-int8", variants.chain_inputs(default, images, lights))
 
 
-def test_set_accuracy(folder: Path, held: data.Heldout) -> dict[str, float]:
-    """RMSE, MS-SSIM and FLIP of a contract model on a 9 x 9 set, source light known."""
+def test_set_accuracy(
+    folder: Path, held: data.Heldout, scores: tuple[str, ...] = tuple(metrics.SCORES)
+) -> dict[str, float]:
+    """RMSE, MS-SSIM and FLIP (or those named in ``scores``) of a contract model on a 9 x 9 set,
+    source light known."""
     chain = contract.StageChain(folder, 2)
     codes = [chain.light_code(held.lights[j][None]) for j in range(held.lights.shape[0])]
 
     def relight(x: np.ndarray, _pose: int, i: int, targets: list[int]) -> np.ndarray:
         return np.concatenate([chain.relight(x[None], held.lights[i][None], codes[j]) for j in targets])
 
-    return metrics.score_test_set(held, chain.resolution, relight)
+    return metrics.score_test_set(held, chain.resolution, relight, scores)
 
 
 def time_ort(folder: Path, threads: int, frames: int = 60) -> float:
@@ -91,17 +94,26 @@ def time_ort(folder: Path, threads: int, frames: int = 60) -> float:
     return 1e3 * (time.perf_counter() - t) / frames
 
 
-def network_timings(folder: Path, threads: tuple[int, ...] = (1, 2), rounds: int = 15, frames: int = 20) -> dict:
+def network_timings(
+    folder: Path,
+    threads: tuple[int, ...] = (1, 2),
+    rounds: int = 15,
+    frames: int = 20,
+    int8: Path | None = None,
+) -> dict:
     """Milliseconds a frame of the network alone (known source light, as ``time_ort``), all in
     one run: ONNX Runtime on the model folder, ONNX Runtime on the same network exported without
-    ``lsyd.optimise``'s rewrites, and PyTorch eager (the peer), each at every thread count. All
+    ``lsyd.optimise``'s rewrites, PyTorch eager (the peer), and, given ``int8`` (the folder's
+    ``lsyd.variants`` int8 variant), ONNX Runtime on that, each at every thread count. The first
     three are the network of the folder's weights (``export.network_from_model``), and are
-    checked to relight alike before they are timed.
+    checked to relight alike before they are timed; the int8 variant is checked to relight
+    within ``variants.ERROR_BOUNDS``.
 
     The machine is shared, so the configurations are interleaved: each round times ``frames``
     frames of every one, in an order rotated from round to round, and each reports the median,
-    min and max of its rounds. The machine and its load average before and after are recorded
-    with them."""
+    min and max of its rounds, in wall time and in the process's CPU time (all threads; less
+    disturbed than wall time by other processes on the cores). The machine and its load
+    average before and after are recorded with them."""
     net = export.network_from_model(folder)
     m = contract.read(folder / "model.json")
     r = m["resolution"]
@@ -111,22 +123,30 @@ def network_timings(folder: Path, threads: tuple[int, ...] = (1, 2), rounds: int
     ref = export.reference_run(net, image, source, target)
     specs = contract.stage_specs(r, tuple(m["widths"]))
     load_before = os.getloadavg()
+    folders = {ORT: folder}
+    if int8 is not None:
+        variants.check_close(int8, ref, "int8")
+        folders[ORT_INT8] = int8
     with tempfile.TemporaryDirectory() as tmp:
         plain = Path(tmp)
         export.write_stages(net, specs, plain, ref, rewrite=False)
+        folders[ORT_PLAIN] = plain
         for f in (folder, plain):
             export.parity(f, specs, ref)
         runs = {}
         for t in threads:
-            for name, f in (("onnxruntime", folder), ("onnxruntime, not rewritten", plain)):
+            for name, f in folders.items():
                 runs[name, t] = _ort_frames(contract.StageChain(f, t), ref)
-            runs["pytorch", t] = _torch_frames(net, t, image, source, target)
+            runs[PEER, t] = _torch_frames(net, t, image, source, target)
         times: dict[tuple, list[float]] = {k: [] for k in runs}
+        cpu: dict[tuple, list[float]] = {k: [] for k in runs}
         keys = list(runs)
         for i in range(rounds):
             for k in keys[i % len(keys) :] + keys[: i % len(keys)]:
                 runs[k](3)  # settles the other configuration's threads and caches
-                times[k].append(1e3 * runs[k](frames) / frames)
+                wall, used = runs[k](frames)
+                times[k].append(1e3 * wall / frames)
+                cpu[k].append(1e3 * used / frames)
     out: dict = {
         "machine": hardware(torch.device("cpu")),
         "rounds": rounds,
@@ -134,22 +154,37 @@ def network_timings(folder: Path, threads: tuple[int, ...] = (1, 2), rounds: int
         "load_average": [load_before[0], os.getloadavg()[0]],
     }
     for (name, t), ms in times.items():
-        out.setdefault(name, {})[str(t)] = {"median": float(np.median(ms)), "min": min(ms), "max": max(ms)}
-    out["peer_ratio"] = {
-        str(t): out["pytorch"][str(t)]["median"] / out["onnxruntime"][str(t)]["median"] for t in threads
-    }
+        c = cpu[name, t]
+        out.setdefault(name, {})[str(t)] = {
+            "median": float(np.median(ms)),
+            "min": min(ms),
+            "max": max(ms),
+            "cpu": {"median": float(np.median(c)), "min": min(c), "max": max(c)},
+        }
+    out["peer_ratio"] = {str(t): out[PEER][str(t)]["median"] / out[ORT][str(t)]["median"] for t in threads}
+    if int8 is not None:
+        out["peer_ratio_int8"] = {
+            str(t): out[PEER][str(t)]["median"] / out[ORT_INT8][str(t)]["median"] for t in threads
+        }
     return out
+
+
+# The configurations ``network_timings`` times.
+ORT = "onnxruntime"
+ORT_INT8 = "onnxruntime, int8"
+ORT_PLAIN = "onnxruntime, not rewritten"
+PEER = "pytorch"
 
 
 def _ort_frames(chain: contract.StageChain, ref: dict[str, np.ndarray]):
     """A timer of ``n`` frames through the stage chain."""
     target_code = chain.light_code(ref["target_light"])
 
-    def run(n: int) -> float:
-        t = time.perf_counter()
+    def run(n: int) -> tuple[float, float]:
+        t, c = time.perf_counter(), time.process_time()
         for _ in range(n):
             chain.relight(ref["image"], ref["light"], target_code)
-        return time.perf_counter() - t
+        return time.perf_counter() - t, time.process_time() - c
 
     return run
 
@@ -159,41 +194,112 @@ def _torch_frames(net: model.LcfnNet, threads: int, image: torch.Tensor, source:
     with torch.inference_mode():
         target_code = net.light_encoder(target)
 
-    def run(n: int) -> float:
+    def run(n: int) -> tuple[float, float]:
         torch.set_num_threads(threads)
         with torch.inference_mode():
-            t = time.perf_counter()
+            t, c = time.perf_counter(), time.process_time()
             for _ in range(n):
                 stem, feats = net.encode(image)
                 net.decode(stem, net.delit(feats, net.light_encoder(source)), target_code).clamp(0.0, 1.0)
-            return time.perf_counter() - t
+            return time.perf_counter() - t, time.process_time() - c
 
     return run
 
 
 def network_table(timings: dict) -> str:
-    """``network_timings`` as a table: medians with min-max, milliseconds a frame."""
+    """``network_timings`` as two tables, wall time and CPU time: medians with min-max,
+    milliseconds a frame, and the peer's time over ONNX Runtime's."""
 
     def cell(x: dict) -> str:
         return f"{x['median']:.2f} ({x['min']:.2f}-{x['max']:.2f})"
 
-    rows = [
-        "| threads | ONNX Runtime | ONNX Runtime, not rewritten | PyTorch eager (peer) | peer / ONNX Runtime |",
-        "|---|---|---|---|---|",
-    ]
-    for t, ratio in timings["peer_ratio"].items():
-        rows.append(
-            f"| {t} | {cell(timings['onnxruntime'][t])} | {cell(timings['onnxruntime, not rewritten'][t])} | "
-            f"{cell(timings['pytorch'][t])} | {ratio:.2f}x |"
-        )
+    heads = {
+        ORT: "ONNX Runtime",
+        ORT_INT8: "ONNX Runtime, int8",
+        ORT_PLAIN: "ONNX Runtime, not rewritten",
+        PEER: "PyTorch eager (peer)",
+    }
+    names = [n for n in heads if n in timings]
+    against = [n for n in (ORT, ORT_INT8) if n in timings]
+    rows = []
+    for what, pick in (("wall", lambda x: x), ("CPU", lambda x: x["cpu"])):
+        rows += [
+            f"| threads ({what} ms) | "
+            + " | ".join(heads[n] for n in names)
+            + "".join(f" | peer / {heads[n]}" for n in against)
+            + " |",
+            "|---" * (1 + len(names) + len(against)) + "|",
+        ]
+        for t in timings["peer_ratio"]:
+            cells = [cell(pick(timings[n][t])) for n in names]
+            cells += [f"{pick(timings[PEER][t])['median'] / pick(timings[n][t])['median']:.2f}x" for n in against]
+            rows.append(f"| {t} | " + " | ".join(cells) + " |")
+        rows.append("")
     load = timings["load_average"]
-    rows += [
-        "",
+    rows.append(
         f"Milliseconds a frame, median (min-max) of {timings['rounds']} interleaved rounds of "
         f"{timings['frames_a_round']} frames each, on {timings['machine']}, shared: one-minute load average "
-        f"{load[0]:.2f} before, {load[1]:.2f} after.",
-    ]
+        f"{load[0]:.2f} before, {load[1]:.2f} after. CPU time is the process's, all its threads."
+    )
     return "\n".join(rows) + "\n"
+
+
+def stage_timings(folders: dict[str, Path], threads: int = 1, rounds: int = 8, frames: int = 20) -> dict:
+    """CPU milliseconds a run of each stage of each model folder (say fp32 and its int8 variant),
+    interleaved round by round, median (min-max): which stages a variant makes cheaper. Each
+    stage is fed what it gets when a random frame is relit (``StageChain.stage_inputs``)."""
+    rng = np.random.default_rng(0)
+    chains = {k: contract.StageChain(f, threads) for k, f in folders.items()}
+    r = next(iter(chains.values())).resolution
+    image = rng.random((1, 3, r, r), dtype=np.float32)
+    light = rng.random((1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS), dtype=np.float32)
+    feeds = {k: c.stage_inputs(image, light, light) for k, c in chains.items()}
+    cpu: dict[str, dict[str, list[float]]] = {s: {k: [] for k in chains} for s in contract.STAGES}
+    for _ in range(rounds):
+        for k, c in chains.items():
+            for stage, feed in feeds[k].items():
+                session = c.sessions[stage]
+                for _ in range(3):
+                    session.run(None, feed)
+                t = time.process_time()
+                for _ in range(frames):
+                    session.run(None, feed)
+                cpu[stage][k].append(1e3 * (time.process_time() - t) / frames)
+    return {
+        s: {k: {"median": float(np.median(v)), "min": min(v), "max": max(v)} for k, v in d.items()}
+        for s, d in cpu.items()
+    }
+
+
+def network_after_traffic(
+    folder: Path, sizes_mb: tuple[int, ...] = (0, 1, 4, 12, 32, 64), threads: int = 2, rounds: int = 10
+) -> dict[int, dict]:
+    """Wall milliseconds of the network (``StageChain``, known source) on frames after which
+    the calling thread copies ``sizes_mb`` megabytes, as the element's conversion, crop and
+    paste of a bigger video frame stream through memory between two network runs: whether
+    the network's time depends on the cache it finds. Sizes interleaved round by round; each
+    round's median of 15 frames, then median (min-max) over rounds."""
+    chain = contract.StageChain(folder, threads)
+    rng = np.random.default_rng(0)
+    r = chain.resolution
+    image = rng.random((1, 3, r, r), dtype=np.float32)
+    light = rng.random((1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS), dtype=np.float32)
+    code = chain.light_code(light)
+    src = np.ones(max(sizes_mb) << 20, np.uint8)
+    dst = np.empty_like(src)
+    out: dict[int, list[float]] = {s: [] for s in sizes_mb}
+    for i in range(rounds):
+        k = i % len(sizes_mb)
+        for size in sizes_mb[k:] + sizes_mb[:k]:
+            ms = []
+            for frame in range(18):
+                np.copyto(dst[: size << 20], src[: size << 20])
+                t = time.perf_counter()
+                chain.relight(image, light, code)
+                if frame >= 3:
+                    ms.append(1e3 * (time.perf_counter() - t))
+            out[size].append(float(np.median(ms)))
+    return {s: {"median": float(np.median(v)), "min": min(v), "max": max(v)} for s, v in out.items()}
 
 
 def sustained_gflops(threads: int) -> float:
@@ -422,26 +528,38 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument(
         "stage",
-        choices=["export", "report", "network", "skips"],
-        help="network: the network alone against PyTorch; skips: only the skip table, "
-        "from the element's run alone (`--group skip`)",
+        choices=["export", "report", "network", "stages", "traffic", "skips"],
+        help="network: the network alone against PyTorch; stages: CPU time of each stage of --model "
+        "and --int8; traffic: the network's time after memory traffic between frames; skips: only the "
+        "skip table, from the element's run alone (`--group skip`)",
     )
     p.add_argument("--data", type=Path, default=ROOT / "data")
     p.add_argument("--runs", type=Path, default=ROOT / "runs")
     p.add_argument("--out", type=Path, default=ROOT / "results" / "benchmark")
     p.add_argument("--model", type=Path, default=ROOT / "models" / "default", help="the model the network stage times")
+    p.add_argument("--int8", type=Path, help="network: also time this int8 variant of --model (`lsyd.variants`)")
     a = p.parse_args()
     if a.stage == "export":
         export_all(a.data, a.runs)
     elif a.stage == "report":
         report(a.data, a.out)
+    elif a.stage == "stages":
+        folders = {"fp32": a.model, **({"int8": a.int8} if a.int8 else {})}
+        for stage, by in stage_timings(folders).items():
+            cells = ", ".join(f"{k} {v['median']:.3f} ({v['min']:.3f}-{v['max']:.3f})" for k, v in by.items())
+            print(f"{stage}: {cells} CPU ms a run, 1 thread")
+    elif a.stage == "traffic":
+        load = os.getloadavg()[0]
+        for size, v in network_after_traffic(a.model).items():
+            print(f"{size} MB copied before each frame: {v['median']:.2f} ({v['min']:.2f}-{v['max']:.2f}) ms")
+        print(f"one-minute load average {load:.2f} before, {os.getloadavg()[0]:.2f} after")
     elif a.stage == "skips":
         element = json.loads((a.out / "element.json").read_text())
         rows = [{**r["variant"], "recordings": r["recordings"]} for r in element]
         (a.out / "skips.md").write_text(skip_table(rows))
         print(skip_table(rows))
     else:
-        timings = network_timings(a.model)
+        timings = network_timings(a.model, int8=a.int8)
         a.out.mkdir(parents=True, exist_ok=True)
         (a.out / "network.json").write_text(json.dumps(timings, indent=2) + "\n")
         (a.out / "network.md").write_text(network_table(timings))
