@@ -64,7 +64,11 @@ fn main() -> Result<(), String> {
     let mut totals: Vec<(String, Score)> = Vec::new();
     for name in &recordings {
         // The call is rendered at 90 frames for the other examples and tests.
-        let frames = if name == "call" { frames.min(90) } else { frames };
+        let frames = if name == "call" {
+            frames.min(90)
+        } else {
+            frames
+        };
         let dir = checkout().join(format!("target/recordings/{name}-{frames}"));
         ensure_recording(&dir, name, frames)?;
         let mut faces = vec![("noisy", dir.join("face.y4m"))];
@@ -104,7 +108,8 @@ fn main() -> Result<(), String> {
         if runs.is_empty() {
             continue;
         }
-        let mean = |f: &dyn Fn(&Score) -> f64| runs.iter().map(|s| f(s)).sum::<f64>() / runs.len() as f64;
+        let mean =
+            |f: &dyn Fn(&Score) -> f64| runs.iter().map(|s| f(s)).sum::<f64>() / runs.len() as f64;
         println!(
             "| mean | | {kind} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.2} |",
             mean(&|s| s.change_rmse),

@@ -126,7 +126,10 @@ fn main() {
     }
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
-    println!("{:<12} {:>26} {:>26} {:>26}", "", "crop", "denoise", "paste");
+    println!(
+        "{:<12} {:>26} {:>26} {:>26}",
+        "", "crop", "denoise", "paste"
+    );
     for case in &mut cases {
         println!(
             "{:<12} {:>26} {:>26} {:>26}",

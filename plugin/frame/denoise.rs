@@ -256,7 +256,13 @@ impl ChannelState {
                 difference * difference
             };
         }
-        box_blur(&s.squared, (w, h), MOTION_RADIUS, &mut s.motion, &mut s.rows);
+        box_blur(
+            &s.squared,
+            (w, h),
+            MOTION_RADIUS,
+            &mut s.motion,
+            &mut s.rows,
+        );
         let Some(noise) = learn_noise(&mut self.noise, s) else {
             self.detail.copy_from_slice(&s.detail);
             return;
@@ -264,11 +270,12 @@ impl ChannelState {
         // Over the noise, per band: what a local mean squared difference is
         // compared with. The share of the new frame goes into `squared`.
         let inverse = noise.map(|n| 1.0 / n);
-        for (share, (&motion, &smooth)) in s.squared.iter_mut().zip(s.motion.iter().zip(&s.smooth)) {
+        for (share, (&motion, &smooth)) in s.squared.iter_mut().zip(s.motion.iter().zip(&s.smooth))
+        {
             *share = new_share(motion * inverse[band(smooth)]);
         }
-        for ((past, &d), (&difference, &share)) in (self.detail.iter_mut().zip(&s.detail))
-            .zip(s.difference.iter().zip(&s.squared))
+        for ((past, &d), (&difference, &share)) in
+            (self.detail.iter_mut().zip(&s.detail)).zip(s.difference.iter().zip(&s.squared))
         {
             let filtered = *past + share * difference;
             *past = if difference.is_nan() { d } else { filtered };
@@ -286,10 +293,12 @@ impl ChannelState {
             disc.weights(&s.xs, ((y0 + y) as f32 + 0.5) * sub, &mut s.weight);
             let row = y * w..(y + 1) * w;
             for ((r, (&v, &dither)), ((&filtered, &d), &weight)) in (s.relit.iter_mut())
-                .zip(s.values[row.clone()].iter().zip(&s.dither[(y0 + y) % DITHER_ROWS]))
                 .zip(
-                    (self.detail[row.clone()].iter().zip(&s.detail[row])).zip(&s.weight),
+                    s.values[row.clone()]
+                        .iter()
+                        .zip(&s.dither[(y0 + y) % DITHER_ROWS]),
                 )
+                .zip((self.detail[row.clone()].iter().zip(&s.detail[row])).zip(&s.weight))
             {
                 *r = v + weight * (filtered - d) + dither;
             }
@@ -320,7 +329,6 @@ impl ChannelState {
         self.area = area;
         self.detail = detail;
     }
-
 }
 
 /// Updates `noise`, the noise's level per band of the smooth value, from one
