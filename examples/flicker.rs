@@ -11,9 +11,12 @@
 //! band of that run carries no noise, only what the transfer keeps of the
 //! source light's shading (and the network's own error).
 //!
+//! With `--flow` it adds TecoGAN's tOF over the face region (as
+//! `evaluate_element` gives it), of the element's output and of the input.
+//!
 //! ```text
 //! cargo run --release --example flicker -- [--recordings steady,slow,cuts,call]
-//!     [--frames 300] [--targets studio,sunset,left-key] [--clean]
+//!     [--frames 300] [--targets studio,sunset,left-key] [--clean] [--flow]
 //!     [--set denoise=false] [--set reuse-interval=1]
 //! ```
 
@@ -27,6 +30,14 @@ use lsydrelight_testkit::{
 /// (its `paste-seconds` over the frames), under whatever else the machine ran.
 fn paste_ms(s: &Score) -> f64 {
     s.stats["paste-seconds"].as_f64().unwrap_or(f64::NAN) * 1e3 / s.frames.max(1) as f64
+}
+
+/// The tOF cell: relit / input, or n/a without `--flow`.
+fn tof(relit: Option<f64>, input: Option<f64>) -> String {
+    match (relit, input) {
+        (Some(r), Some(i)) => format!("{r:.4} / {i:.4}"),
+        _ => "n/a".into(),
+    }
 }
 
 fn main() -> Result<(), String> {
@@ -45,6 +56,7 @@ fn main() -> Result<(), String> {
         .transpose()?
         .unwrap_or(300);
     let clean = args.iter().any(|a| a == "--clean");
+    let flow = args.iter().any(|a| a == "--flow");
     // Every `--set property=value`, in order.
     let sets: Vec<(String, String)> = args
         .windows(2)
@@ -58,9 +70,9 @@ fn main() -> Result<(), String> {
     let props: Vec<(&str, &str)> = sets.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
 
     println!(
-        "| recording | target | face | change frame: relit / input | change region: relit / input | RMSE region: relit / input | smooth band: relit / input | detail band: relit / input | detail energy / truth's | paste ms/frame |"
+        "| recording | target | face | change frame: relit / input | change region: relit / input | RMSE region: relit / input | smooth band: relit / input | detail band: relit / input | detail energy / truth's | paste ms/frame | tOF: relit / input |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut totals: Vec<(String, Score)> = Vec::new();
     for name in &recordings {
         // The call is rendered at 90 frames for the other examples and tests.
@@ -79,9 +91,9 @@ fn main() -> Result<(), String> {
         }
         for target in &targets {
             for (kind, face) in &faces {
-                let s = score_face(&dir, face, target, true, &props, false)?;
+                let s = score_face(&dir, face, target, true, &props, flow)?;
                 println!(
-                    "| {name} | {target} | {kind} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.2} |",
+                    "| {name} | {target} | {kind} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.2} | {} |",
                     s.change_rmse,
                     s.input_change_rmse,
                     s.change_rmse_region,
@@ -94,6 +106,7 @@ fn main() -> Result<(), String> {
                     s.input_bands.detail,
                     s.detail_energy_ratio,
                     paste_ms(&s),
+                    tof(s.tof_region, s.input_tof_region),
                 );
                 totals.push((kind.to_string(), s));
             }
@@ -111,7 +124,7 @@ fn main() -> Result<(), String> {
         let mean =
             |f: &dyn Fn(&Score) -> f64| runs.iter().map(|s| f(s)).sum::<f64>() / runs.len() as f64;
         println!(
-            "| mean | | {kind} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.2} |",
+            "| mean | | {kind} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} / {:.3} | {:.3} | {:.2} | {} |",
             mean(&|s| s.change_rmse),
             mean(&|s| s.input_change_rmse),
             mean(&|s| s.change_rmse_region),
@@ -124,6 +137,10 @@ fn main() -> Result<(), String> {
             mean(&|s| s.input_bands.detail),
             mean(&|s| s.detail_energy_ratio),
             mean(&paste_ms),
+            tof(
+                flow.then(|| mean(&|s| s.tof_region.unwrap_or(f64::NAN))),
+                flow.then(|| mean(&|s| s.input_tof_region.unwrap_or(f64::NAN))),
+            ),
         );
     }
     Ok(())
