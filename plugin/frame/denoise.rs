@@ -114,9 +114,10 @@ pub struct DetailDenoiser {
 
 impl DetailDenoiser {
     /// Forgets the past: the next frame passes as it is and starts afresh.
-    pub fn reset(&mut self) {
+    /// Returns whether there was a past to forget.
+    pub fn reset(&mut self) -> bool {
         self.stream = None;
-        self.channels.clear();
+        !std::mem::take(&mut self.channels).is_empty()
     }
 
     /// Denoises `frame` round `crop`, as far as the lighting change of fade

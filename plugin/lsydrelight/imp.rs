@@ -521,9 +521,14 @@ impl LsydRelight {
         }
         laps.lap();
         let outcome_shows_face = outcome.change.is_some();
-        if !outcome_shows_face || !settings.denoise {
-            // The next denoised frame must not be filtered against one that was not.
-            state.denoiser.reset();
+        // The next denoised frame must not be filtered against one that was not.
+        if (!outcome_shows_face || !settings.denoise) && state.denoiser.reset() {
+            gst::debug!(
+                CAT,
+                imp = self,
+                "denoising starts afresh: the frame at {} was not denoised",
+                buffer.pts().display()
+            );
         }
         let predicted = outcome.predicted;
         let warn_nan = match outcome.action {
