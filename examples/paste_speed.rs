@@ -1,4 +1,5 @@
-//! Times the crop (`sample_crop`) and the paste (`LightingChange::apply`) on
+//! Times the crop (`sample_crop`), the denoising (`DetailDenoiser::apply`,
+//! the element's `denoise`) and the paste (`LightingChange::apply`) on
 //! synthetic frames, without GStreamer, as the element runs them: the default
 //! full-height crop, the 96 px network and a feather of half the crop.
 //!
@@ -14,7 +15,7 @@
 use std::time::Instant;
 
 use gstlsydrelight::frame::{
-    Crop, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
+    Crop, DetailDenoiser, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
 };
 
 const SIZES: [(&str, usize, usize); 4] = [
@@ -47,7 +48,9 @@ struct Case {
     crop: Crop,
     feather: usize,
     change: LightingChange,
+    denoiser: DetailDenoiser,
     crop_ms: Vec<f64>,
+    denoise_ms: Vec<f64>,
     paste_ms: Vec<f64>,
 }
 
@@ -95,7 +98,9 @@ fn main() {
                 buffers,
                 crop,
                 feather: (FEATHER * crop.size as f64).round() as usize,
+                denoiser: DetailDenoiser::default(),
                 crop_ms: Vec::with_capacity(rounds),
+                denoise_ms: Vec::with_capacity(rounds),
                 paste_ms: Vec::with_capacity(rounds),
             });
         }
@@ -109,6 +114,11 @@ fn main() {
             std::hint::black_box(image);
 
             let start = Instant::now();
+            case.denoiser
+                .apply(&mut case.buffers.frame_mut(), case.crop, case.feather, 1.0);
+            case.denoise_ms.push(start.elapsed().as_secs_f64() * 1e3);
+
+            let start = Instant::now();
             case.change
                 .apply(&mut case.buffers.frame_mut(), case.crop, case.feather);
             case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
@@ -116,12 +126,16 @@ fn main() {
     }
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
-    println!("{:<12} {:>26} {:>26}", "", "crop", "paste");
+    println!(
+        "{:<12} {:>26} {:>26} {:>26}",
+        "", "crop", "denoise", "paste"
+    );
     for case in &mut cases {
         println!(
-            "{:<12} {:>26} {:>26}",
+            "{:<12} {:>26} {:>26} {:>26}",
             case.name,
             summary(&mut case.crop_ms),
+            summary(&mut case.denoise_ms),
             summary(&mut case.paste_ms)
         );
     }

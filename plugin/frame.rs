@@ -753,7 +753,9 @@ fn round_to_u8(x: f32) -> u8 {
     (shifted.to_bits() + u32::from(c - whole == 0.5)) as u8
 }
 
+mod denoise;
 mod gain_field;
+pub use denoise::DetailDenoiser;
 use gain_field::GainField;
 
 #[cfg(test)]

@@ -33,6 +33,7 @@ use super::video::{
 use crate::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Source,
 };
+use crate::frame::DetailDenoiser;
 use crate::light::Light;
 use crate::targets::Crossfade;
 
@@ -63,6 +64,8 @@ struct State {
     fade: Crossfade,
     /// A NaN warning was posted and no frame has been relit since.
     nan_warned: bool,
+    /// The camera's noise taken out of the face's detail (`denoise`).
+    denoiser: DetailDenoiser,
 }
 
 pub struct LsydRelight {
@@ -94,6 +97,7 @@ impl State {
     /// frame's time. Returns whether there was temporal state to forget.
     fn reset(&mut self) -> bool {
         self.region.reset();
+        self.denoiser.reset();
         self.last_face_rt = None;
         self.policy.reset()
     }
@@ -504,7 +508,11 @@ impl LsydRelight {
                 gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
                     .map_err(|_| gst::FlowError::Error)?;
             let feather = (settings.feather * crop.size as f64).round() as usize;
+            let denoiser = settings.denoise.then_some(&mut state.denoiser);
             with_frame_mut(&mut frame, |fm| {
+                if let Some(denoiser) = denoiser {
+                    denoiser.apply(fm, crop, feather, outcome.strength);
+                }
                 change.apply_faded(fm, crop, feather, outcome.strength)
             })
             .ok_or(gst::FlowError::NotNegotiated)?;
@@ -513,6 +521,15 @@ impl LsydRelight {
         }
         laps.lap();
         let outcome_shows_face = outcome.change.is_some();
+        // The next denoised frame must not be filtered against one that was not.
+        if (!outcome_shows_face || !settings.denoise) && state.denoiser.reset() {
+            gst::debug!(
+                CAT,
+                imp = self,
+                "denoising starts afresh: the frame at {} was not denoised",
+                buffer.pts().display()
+            );
+        }
         let predicted = outcome.predicted;
         let warn_nan = match outcome.action {
             Action::PassedThrough(PassThrough::NonFinite) => {
@@ -1015,6 +1032,7 @@ impl AggregatorImpl for LsydRelight {
             target_generation,
             fade,
             nan_warned: false,
+            denoiser: DetailDenoiser::default(),
         });
         *lock(&self.stats) = Stats::default();
         lock(&self.monitor).restart();

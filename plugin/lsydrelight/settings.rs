@@ -25,6 +25,7 @@ const DEFAULT_RESET_GAP: gst::ClockTime = gst::ClockTime::from_seconds(1);
 const DEFAULT_CROP_CENTRE: f64 = 0.5;
 const DEFAULT_CROP_SIZE: f64 = 1.0;
 const DEFAULT_FEATHER: f64 = 0.5;
+const DEFAULT_DENOISE: bool = true;
 const DEFAULT_QOS: bool = true;
 const DEFAULT_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_mseconds(500);
 const MAX_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_seconds(60);
@@ -66,6 +67,9 @@ pub struct Settings {
     pub crop: CropRegion,
     /// Fade width at the face region's inner edges, as a fraction of the region.
     pub feather: f64,
+    /// Take the camera's noise out of the face's detail over time before
+    /// relighting it (`frame::DetailDenoiser`).
+    pub denoise: bool,
     pub reset_gap: gst::ClockTime,
     pub skips: Skips,
     pub qos: bool,
@@ -99,6 +103,7 @@ impl Default for Settings {
                 size: DEFAULT_CROP_SIZE,
             },
             feather: DEFAULT_FEATHER,
+            denoise: DEFAULT_DENOISE,
             reset_gap: DEFAULT_RESET_GAP,
             skips: Skips::default(),
             qos: DEFAULT_QOS,
@@ -176,6 +181,7 @@ impl Settings {
             "crop-y" => self.crop.y = v.get().expect(checked),
             "crop-size" => self.crop.size = v.get().expect(checked),
             "feather" => self.feather = v.get().expect(checked),
+            "denoise" => self.denoise = v.get().expect(checked),
             "reset-gap" => self.reset_gap = gst::ClockTime::from_nseconds(v.get().expect(checked)),
             "reuse-interval" => self.skips.reuse_interval = v.get().expect(checked),
             "reuse-threshold" => self.skips.reuse_threshold = v.get::<f64>().expect(checked) as f32,
@@ -228,6 +234,7 @@ impl Settings {
             "crop-y" => self.crop.y.to_value(),
             "crop-size" => self.crop.size.to_value(),
             "feather" => self.feather.to_value(),
+            "denoise" => self.denoise.to_value(),
             "reset-gap" => self.reset_gap.nseconds().to_value(),
             "reuse-interval" => self.skips.reuse_interval.to_value(),
             "reuse-threshold" => (self.skips.reuse_threshold as f64).to_value(),
@@ -437,6 +444,12 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .minimum(0.0)
                 .maximum(1.0)
                 .default_value(DEFAULT_FEATHER)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("denoise")
+                .nick("Denoise the face")
+                .blurb("Take the camera's noise out of the detail round the face, over time, before relighting it: still detail is averaged over about 8 frames, moving detail taken as it is; the relit face then flickers less than the camera's picture. false keeps the frame's own detail, noise and all")
+                .default_value(d.denoise)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecUInt64::builder("reset-gap")

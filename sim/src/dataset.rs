@@ -617,6 +617,9 @@ pub struct RecordedFrame {
     pub state: State,
     /// What the webcam recorded (with sensor noise).
     pub face: RgbImage,
+    /// The same frame without sensor noise: the face under the source light
+    /// exactly, for telling what in an error comes from the camera's noise.
+    pub clean_face: RgbImage,
     /// What the monitor showed at this time (the screen capture's frame).
     pub monitor: RgbImage,
     /// The exact, noiseless frame relit to each target light, in target order.
@@ -717,11 +720,13 @@ impl Recording {
         let transport = self.renderer.prepare(&self.look, &state);
         let mut imgs = self.renderer.render(&transport, &lights).into_iter();
         let sensor = Sensor::default();
-        let face = sensor.capture(&imgs.next().unwrap(), self.spec.seed, i as u64);
+        let lit = imgs.next().unwrap();
+        let face = sensor.capture(&lit, self.spec.seed, i as u64);
         RecordedFrame {
             time: t,
             state,
             face,
+            clean_face: sensor.clean(&lit),
             monitor,
             ground_truth: imgs.map(|img| sensor.clean(&img)).collect(),
         }

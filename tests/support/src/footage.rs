@@ -114,6 +114,12 @@ pub fn through(frames: Vec<RgbImage>, format: Format) -> Result<Vec<RgbImage>, S
 /// The frames relit by the element with no monitor stream by `model`, each
 /// with the square the element relit (its `face` region-of-interest meta; None
 /// when it relit none).
+///
+/// The element's denoising is off (`denoise=false`): [`crate::quality`]'s
+/// measures read the lighting change as the output over the input, pixel by
+/// pixel, and denoising changes each pixel by the noise it removes, which they
+/// would read as blotches and steps of the change (on the film clip's near-black
+/// pixels most). These runs measure the lighting change alone.
 pub fn relight(
     frames: &[RgbImage],
     model: &Path,
@@ -121,7 +127,7 @@ pub fn relight(
     format: Format,
 ) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
     let element = format!(
-        "lsydrelight name=r model-location=\"{}\" target-location=\"{}\"",
+        "lsydrelight name=r denoise=false model-location=\"{}\" target-location=\"{}\"",
         model.display(),
         target.display()
     );

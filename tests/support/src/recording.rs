@@ -35,6 +35,22 @@ pub struct Score {
     /// Adjacent-frame RMSE of the output, and of the change against the ground truth's change.
     pub adjacent_rmse: f64,
     pub change_rmse: f64,
+    /// The change error of the unrelit input: what the element's flicker is
+    /// compared with. The input's frame-to-frame change carries the camera's
+    /// noise and the screen's changing light, the truth's neither.
+    pub input_change_rmse: f64,
+    /// The change errors over the face region only, of the output and of the input.
+    pub change_rmse_region: f64,
+    pub input_change_rmse_region: f64,
+    /// The face region's error split into two bands ([`Bands`]): the smooth
+    /// band (the error blurred over [`DETAIL_RADIUS_FRACTION`] of the region)
+    /// and the detail band (the rest), of the output and of the input.
+    pub bands: Bands,
+    pub input_bands: Bands,
+    /// Sharpness: the RMS of the output's detail band over the truth's, in the
+    /// face region. Below 1 the output is softer than the truth; the camera's
+    /// noise, which the truth has not, raises it.
+    pub detail_energy_ratio: f64,
     /// TecoGAN's tOF over the face region ([`crate::flow`]): the mean length, in
     /// pixels, of the difference between the output's optical flow from frame to
     /// frame and the ground truth's; and the same for the unrelit input. Computed
@@ -48,6 +64,84 @@ pub struct Score {
     pub ms_per_frame: f64,
     /// The element's `stats` at the end.
     pub stats: serde_json::Value,
+}
+
+/// RMSE on 0-255 of an error split into a smooth band and a detail band.
+#[derive(Clone, Copy, Debug, Default, serde::Serialize)]
+pub struct Bands {
+    pub smooth: f64,
+    pub detail: f64,
+}
+
+/// Radius, as a fraction of the face region's side, of the two box blurs that
+/// make an error's smooth band: 1/48, 7.5 pixels at 360 lines. Finer than the
+/// gain field's finest shading (6% of the crop), so the detail band is what
+/// the transfer carries over from the input as it is: the camera's noise, and
+/// the source light's small shadows and highlights.
+pub const DETAIL_RADIUS_FRACTION: f64 = 1.0 / 48.0;
+
+/// Running sums of squares of the two bands of an error, and of the detail
+/// bands of the two images compared.
+#[derive(Default)]
+struct BandSums {
+    smooth: f64,
+    detail: f64,
+    detail_energy: [f64; 2],
+    n: usize,
+}
+
+impl BandSums {
+    /// Adds the error `a − b` over `region` (x, y, side).
+    fn add(&mut self, a: &RgbImage, b: &RgbImage, (x0, y0, side): (usize, usize, usize)) {
+        let radius = ((side as f64 * DETAIL_RADIUS_FRACTION).round() as usize).max(1);
+        let smooth = |v: &[f64]| box_blur(&box_blur(v, side, radius), side, radius);
+        for c in 0..3 {
+            let [va, vb] = [a, b].map(|img| -> Vec<f64> {
+                (0..side * side)
+                    .map(|k| img.data[((y0 + k / side) * img.width + x0 + k % side) * 3 + c] as f64)
+                    .collect()
+            });
+            let [sa, sb] = [smooth(&va), smooth(&vb)];
+            for k in 0..side * side {
+                let (da, db) = (va[k] - sa[k], vb[k] - sb[k]);
+                self.smooth += (sa[k] - sb[k]).powi(2);
+                self.detail += (da - db).powi(2);
+                self.detail_energy[0] += da * da;
+                self.detail_energy[1] += db * db;
+            }
+            self.n += side * side;
+        }
+    }
+
+    fn rmse(&self) -> Bands {
+        let n = self.n.max(1) as f64;
+        Bands {
+            smooth: (self.smooth / n).sqrt(),
+            detail: (self.detail / n).sqrt(),
+        }
+    }
+}
+
+/// A box blur of a side × side map, `radius` each way, shrinking at the borders.
+fn box_blur(field: &[f64], side: usize, radius: usize) -> Vec<f64> {
+    let mut out = vec![0.0; field.len()];
+    let mut prefix = vec![0.0; side + 1];
+    // Along rows, then along columns of the result, each transposed on writing.
+    let mut pass = |src: &[f64], dst: &mut [f64]| {
+        for line in 0..side {
+            for k in 0..side {
+                prefix[k + 1] = prefix[k] + src[line * side + k];
+            }
+            for k in 0..side {
+                let (lo, hi) = (k.saturating_sub(radius), (k + radius + 1).min(side));
+                dst[k * side + line] = (prefix[hi] - prefix[lo]) / (hi - lo) as f64;
+            }
+        }
+    };
+    let mut rows = vec![0.0; field.len()];
+    pass(field, &mut rows);
+    pass(&rows, &mut out);
+    out
 }
 
 /// Thresholds of the adjacent-frame error rates, RMSE on 0-255: the same as
@@ -83,6 +177,31 @@ fn sq_err(a: &RgbImage, b: &RgbImage, region: Option<(usize, usize, usize)>) -> 
         }
     }
     (sum, n)
+}
+
+/// The change error of one frame pair: the RMSE, over `region` (x, y, side)
+/// or the whole frame, of the change from `video.1` to `video.0` less the
+/// change from `truth.1` to `truth.0`.
+fn change_error(
+    video: (&RgbImage, &RgbImage),
+    truth: (&RgbImage, &RgbImage),
+    region: Option<(usize, usize, usize)>,
+) -> f64 {
+    let (now, before) = video;
+    let (x0, y0, size) = region.unwrap_or((0, 0, usize::MAX));
+    let (mut sum, mut n) = (0.0, 0);
+    for y in y0..(y0 + size).min(now.height) {
+        for x in x0..(x0 + size).min(now.width) {
+            let i = (y * now.width + x) * 3;
+            for k in i..i + 3 {
+                let d_video = now.data[k] as f64 - before.data[k] as f64;
+                let d_truth = truth.0.data[k] as f64 - truth.1.data[k] as f64;
+                sum += (d_video - d_truth) * (d_video - d_truth);
+            }
+            n += 3;
+        }
+    }
+    (sum / n.max(1) as f64).sqrt()
 }
 
 /// What GStreamer should be told of deskstage's `.y4m` files: BT.601, limited
@@ -167,6 +286,27 @@ pub fn score_recording(
     properties: &[(&str, &str)],
     with_flow: bool,
 ) -> Result<Score, String> {
+    score_face(
+        dir,
+        &dir.join("face.y4m"),
+        target,
+        with_monitor,
+        properties,
+        with_flow,
+    )
+}
+
+/// [`score_recording`] with another face video in place of `<dir>/face.y4m`:
+/// the recording's noiseless face ([`ensure_clean_face`]), to tell what in the
+/// error comes from the camera's noise and what from the source light.
+pub fn score_face(
+    dir: &Path,
+    face: &Path,
+    target: &str,
+    with_monitor: bool,
+    properties: &[(&str, &str)],
+    with_flow: bool,
+) -> Result<Score, String> {
     init();
     let monitor = if with_monitor {
         format!(
@@ -176,11 +316,10 @@ pub fn score_recording(
     } else {
         String::new()
     };
-    let face = dir.join("face.y4m");
     let pipeline = launch(&format!(
         "lsydrelight name=r {} ! queue max-size-buffers=4 ! r.sink {monitor} \
          r.src ! appsink name=out sync=false",
-        play_y4m(&face)
+        play_y4m(face)
     ))?;
     let r = pipeline.by_name("r").ok_or("no element r")?;
     r.set_property(
@@ -198,7 +337,7 @@ pub fn score_recording(
     }
     score_pipeline(
         &pipeline,
-        &face,
+        face,
         &dir.join(format!("truth-{target}.y4m")),
         Some(&r),
         with_flow,
@@ -241,9 +380,11 @@ fn score_pipeline(
     let mut score = Score::default();
     let (mut region_err, mut region_n, mut frame_err, mut frame_n, mut in_err) =
         (0.0, 0, 0.0, 0, 0.0);
-    let mut previous: Option<(RgbImage, RgbImage)> = None;
+    let mut previous: Option<[RgbImage; 3]> = None;
     let mut adjacent = Vec::new();
-    let mut change = 0.0;
+    let (mut change, mut input_change) = (0.0, 0.0);
+    let (mut change_region, mut input_change_region) = (0.0, 0.0);
+    let (mut bands, mut input_bands) = (BandSums::default(), BandSums::default());
     // The face regions of the last output, truth and input, and the tOF sums.
     let mut previous_luma: Option<[Gray; 3]> = None;
     let (mut tof_out, mut tof_in, mut tof_pairs) = (0.0, 0.0, 0);
@@ -279,17 +420,17 @@ fn score_pipeline(
         let (e, n) = sq_err(&out, &gt, None);
         frame_err += e;
         frame_n += n;
-        if let Some((po, pg)) = &previous {
-            let mut a = 0.0;
-            let mut c = 0.0;
-            for i in 0..out.data.len() {
-                let d_out = out.data[i] as f64 - po.data[i] as f64;
-                let d_gt = gt.data[i] as f64 - pg.data[i] as f64;
-                a += d_out * d_out;
-                c += (d_out - d_gt) * (d_out - d_gt);
-            }
+        bands.add(&out, &gt, face);
+        input_bands.add(&inp, &gt, face);
+        if let Some([po, pg, pi]) = &previous {
+            let a: f64 = (out.data.iter().zip(&po.data))
+                .map(|(&o, &p)| (o as f64 - p as f64).powi(2))
+                .sum();
             adjacent.push((a / out.data.len() as f64).sqrt());
-            change += (c / out.data.len() as f64).sqrt();
+            change += change_error((&out, po), (&gt, pg), None);
+            input_change += change_error((&inp, pi), (&gt, pg), None);
+            change_region += change_error((&out, po), (&gt, pg), Some(face));
+            input_change_region += change_error((&inp, pi), (&gt, pg), Some(face));
         }
         if with_flow {
             let flow_started = Instant::now();
@@ -303,7 +444,7 @@ fn score_pipeline(
             previous_luma = Some(luma);
             flow_time += flow_started.elapsed();
         }
-        previous = Some((out, gt));
+        previous = Some([out, gt, inp]);
         score.frames += 1;
     };
     let elapsed = started.elapsed().saturating_sub(flow_time);
@@ -333,7 +474,14 @@ fn score_pipeline(
         .iter()
         .map(|t| adjacent.iter().filter(|a| *a > t).count() as f64 / adjacent.len().max(1) as f64)
         .collect();
-    score.change_rmse = change / (score.frames - 1).max(1) as f64;
+    let pairs = (score.frames - 1).max(1) as f64;
+    score.change_rmse = change / pairs;
+    score.input_change_rmse = input_change / pairs;
+    score.change_rmse_region = change_region / pairs;
+    score.input_change_rmse_region = input_change_region / pairs;
+    score.bands = bands.rmse();
+    score.detail_energy_ratio = (bands.detail_energy[0] / bands.detail_energy[1].max(1e-9)).sqrt();
+    score.input_bands = input_bands.rmse();
     if with_flow && tof_pairs > 0 {
         score.tof_region = Some(tof_out / tof_pairs as f64);
         score.input_tof_region = Some(tof_in / tof_pairs as f64);
@@ -357,6 +505,33 @@ pub fn ensure_recording(dir: &Path, name: &str, frames: usize) -> Result<(), Str
     spec.frames = frames;
     let rec = deskstage::dataset::Recording::new(spec)?;
     rec.write(dir).map_err(|e| e.to_string())
+}
+
+/// Writes `path`, the first `frames` frames of the standard recording `name`
+/// as the webcam would have filmed them without sensor noise (4:2:0, as
+/// `face.y4m`); skipped when present. Rendered apart from the recording (only
+/// the source light, about half a second a frame) so that recordings already
+/// rendered need not be again.
+pub fn ensure_clean_face(path: &Path, name: &str, frames: usize) -> Result<(), String> {
+    if path.exists() {
+        return Ok(());
+    }
+    let mut spec = deskstage::dataset::RecordingSpec::standard(name).ok_or("unknown recording")?;
+    spec.frames = frames;
+    let rec = deskstage::dataset::Recording::new(spec)?;
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| e.to_string())?;
+    }
+    let partial = path.with_extension("partial");
+    let s = &rec.spec;
+    let mut w = deskstage::io::Y4mWriter::create(&partial, s.width, s.height, s.fps, Chroma::C420)
+        .map_err(|e| e.to_string())?;
+    for i in 0..frames {
+        w.write(&rec.frame(i, false).clean_face)
+            .map_err(|e| e.to_string())?;
+    }
+    w.finish().map_err(|e| e.to_string())?;
+    std::fs::rename(&partial, path).map_err(|e| e.to_string())
 }
 
 #[cfg(test)]

@@ -1,0 +1,273 @@
+use super::*;
+use crate::frame::{OwnedFrame, YuvMatrix};
+
+/// Normal noise from a fixed seed: a xorshift generator and Box-Muller.
+struct Noise(u64);
+
+impl Noise {
+    fn uniform(&mut self) -> f32 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        ((self.0 >> 40) as f32 + 0.5) / (1u64 << 24) as f32
+    }
+
+    fn normal(&mut self) -> f32 {
+        let (a, b) = (self.uniform(), self.uniform());
+        (-2.0 * a.ln()).sqrt() * (std::f32::consts::TAU * b).cos()
+    }
+}
+
+const SIZE: (usize, usize) = (96, 64);
+
+/// Skin-like texture: fine stripes and blotches on a gradient, shifted right by `shift` pixels.
+fn scene(x: usize, y: usize, shift: f32) -> f32 {
+    let x = x as f32 - shift;
+    let y = y as f32;
+    110.0 + 0.3 * x + 12.0 * (x * 0.9).sin() * (y * 0.7).cos() + 8.0 * ((x + 2.0 * y) * 0.35).sin()
+}
+
+/// An RGB frame of the scene with noise of `sigma` levels in every channel.
+fn noisy_rgb(shift: f32, sigma: f32, noise: &mut Noise) -> OwnedFrame {
+    let mut f = OwnedFrame::new(PixelFormat::Rgb, SIZE, 0, YuvMatrix::BT601_LIMITED, || 0);
+    let data = &mut f.planes[0].0;
+    for y in 0..SIZE.1 {
+        for x in 0..SIZE.0 {
+            let clean = scene(x, y, shift);
+            for c in 0..3 {
+                let v = clean + 10.0 * c as f32 + sigma * noise.normal();
+                data[(y * SIZE.0 + x) * 3 + c] = v.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    f
+}
+
+/// A crop round the frame's middle, with [`WIDE`]: the denoising shows whole
+/// (to a millionth) over the frame.
+fn whole_frame() -> Crop {
+    Crop {
+        x: 0,
+        y: 0,
+        size: 96,
+    }
+}
+
+/// A fade so wide that it barely begins within the frame.
+const WIDE: usize = 1_000_000;
+
+/// RMSE of the middle of frame `f` (8 pixels in from each edge) against the clean scene.
+fn error(f: &OwnedFrame, shift: f32) -> f32 {
+    let data = &f.planes[0].0;
+    let (mut sum, mut n) = (0.0, 0);
+    for y in 8..SIZE.1 - 8 {
+        for x in 8..SIZE.0 - 8 {
+            for c in 0..3 {
+                let d =
+                    data[(y * SIZE.0 + x) * 3 + c] as f32 - (scene(x, y, shift) + 10.0 * c as f32);
+                sum += d * d;
+                n += 1;
+            }
+        }
+    }
+    (sum / n as f32).sqrt()
+}
+
+/// RMSE of the change from frame `a` to frame `b` over their middle.
+fn change(a: &OwnedFrame, b: &OwnedFrame) -> f32 {
+    let (a, b) = (&a.planes[0].0, &b.planes[0].0);
+    let (mut sum, mut n) = (0.0, 0);
+    for y in 8..SIZE.1 - 8 {
+        for x in 8..SIZE.0 - 8 {
+            for c in 0..3 {
+                let i = (y * SIZE.0 + x) * 3 + c;
+                let d = b[i] as f32 - a[i] as f32;
+                sum += d * d;
+                n += 1;
+            }
+        }
+    }
+    (sum / n as f32).sqrt()
+}
+
+#[test]
+fn a_still_face_loses_most_of_its_noise_and_flicker() {
+    let mut denoiser = DetailDenoiser::default();
+    let mut noise = Noise(7);
+    let (mut before, mut after) = (Vec::new(), Vec::new());
+    for _ in 0..30 {
+        let raw = noisy_rgb(0.0, 4.0, &mut noise);
+        let mut out = noisy_rgb(0.0, 0.0, &mut noise);
+        out.planes[0].0.copy_from_slice(&raw.planes[0].0);
+        denoiser.apply(&mut out.frame_mut(), whole_frame(), WIDE, 1.0);
+        before.push(raw);
+        after.push(out);
+    }
+    let last = |v: &[OwnedFrame]| (error(&v[29], 0.0), change(&v[28], &v[29]));
+    let ((raw_error, raw_change), (error_after, change_after)) = (last(&before), last(&after));
+    // The smooth band keeps a fifth of the noise; the detail about a third.
+    assert!(
+        error_after < 0.5 * raw_error && change_after < 0.4 * raw_change,
+        "error {raw_error:.2} -> {error_after:.2}, change {raw_change:.2} -> {change_after:.2}"
+    );
+}
+
+#[test]
+fn the_first_frame_passes_as_it_is_and_so_after_a_reset() {
+    let mut denoiser = DetailDenoiser::default();
+    let mut noise = Noise(3);
+    for round in 0..2 {
+        let raw = noisy_rgb(0.0, 4.0, &mut noise);
+        let mut out = noisy_rgb(0.0, 4.0, &mut noise);
+        out.planes[0].0.copy_from_slice(&raw.planes[0].0);
+        denoiser.apply(&mut out.frame_mut(), whole_frame(), WIDE, 1.0);
+        assert!(out.planes[0].0 == raw.planes[0].0, "round {round}");
+        // A second frame is filtered; a reset forgets it.
+        denoiser.apply(
+            &mut noisy_rgb(0.0, 4.0, &mut noise).frame_mut(),
+            whole_frame(),
+            WIDE,
+            1.0,
+        );
+        denoiser.reset();
+    }
+}
+
+#[test]
+fn a_moving_face_leaves_no_trail() {
+    let mut denoiser = DetailDenoiser::default();
+    let mut noise = Noise(11);
+    // Held still long enough to be filtered, then moving 2 pixels a frame.
+    let mut worst: f32 = 0.0;
+    let mut raw_worst: f32 = 0.0;
+    for i in 0..30 {
+        let shift = if i < 15 { 0.0 } else { 2.0 * (i - 14) as f32 };
+        let mut f = noisy_rgb(shift, 2.0, &mut noise);
+        raw_worst = raw_worst.max(error(&f, shift));
+        denoiser.apply(&mut f.frame_mut(), whole_frame(), WIDE, 1.0);
+        if i >= 15 {
+            worst = worst.max(error(&f, shift));
+        }
+    }
+    // A trail of the texture where it was would be an error of several levels.
+    assert!(
+        worst < 1.2 * raw_worst,
+        "moving: error up to {worst:.2} against the input's {raw_worst:.2}"
+    );
+}
+
+#[test]
+fn nothing_changes_beyond_the_fade_or_at_strength_zero() {
+    let mut noise = Noise(5);
+    // A small crop in the corner: its disc and fade end well inside the frame.
+    let crop = Crop {
+        x: 0,
+        y: 0,
+        size: 32,
+    };
+    for strength in [1.0, 0.0] {
+        let mut denoiser = DetailDenoiser::default();
+        for _ in 0..5 {
+            let raw = noisy_rgb(0.0, 4.0, &mut noise);
+            let mut out = noisy_rgb(0.0, 0.0, &mut noise);
+            out.planes[0].0.copy_from_slice(&raw.planes[0].0);
+            denoiser.apply(&mut out.frame_mut(), crop, 8, strength);
+            // The crop's centre, its inner radius and the fade: the farthest the
+            // denoising reaches along either axis.
+            let reach = 16 + (INNER_RADIUS * 32.0) as usize + 8;
+            for y in 0..SIZE.1 {
+                for x in 0..SIZE.0 {
+                    if strength > 0.0 && x.max(y) <= reach {
+                        continue;
+                    }
+                    let i = (y * SIZE.0 + x) * 3;
+                    assert_eq!(
+                        out.planes[0].0[i..i + 3],
+                        raw.planes[0].0[i..i + 3],
+                        "({x}, {y}) at strength {strength}"
+                    );
+                }
+            }
+        }
+    }
+}
+
+/// Every plane's bytes of a frame.
+type Planes = Vec<Vec<u8>>;
+
+#[test]
+fn every_format_is_denoised_and_padding_kept() {
+    for format in [
+        PixelFormat::I420,
+        PixelFormat::Nv12,
+        PixelFormat::Y444,
+        PixelFormat::Bgrx,
+        PixelFormat::Rgb,
+    ] {
+        let mut denoiser = DetailDenoiser::default();
+        let mut noise = Noise(9);
+        let mut last_change = 0.0;
+        let mut raw_change = 0.0;
+        let mut previous: Option<(Planes, Planes)> = None;
+        for _ in 0..12 {
+            // A still scene with noise in every byte, padding included.
+            let mut pixel = 0usize;
+            let mut f = OwnedFrame::new(format, SIZE, 4, YuvMatrix::BT601_LIMITED, || {
+                pixel += 1;
+                (120.0 + 20.0 * ((pixel % 97) as f32 * 0.3).sin() + 4.0 * noise.normal())
+                    .round()
+                    .clamp(0.0, 255.0) as u8
+            });
+            let raw: Vec<Vec<u8>> = f.planes.iter().map(|p| p.0.clone()).collect();
+            denoiser.apply(&mut f.frame_mut(), whole_frame(), WIDE, 1.0);
+            let out: Vec<Vec<u8>> = f.planes.iter().map(|p| p.0.clone()).collect();
+            // Padding: the last 4 bytes of every row, and the X of BGRx.
+            for (p, (plane, stride)) in f.planes.iter().enumerate() {
+                for (row, bytes) in plane.chunks(*stride).enumerate() {
+                    let pad = stride - 4..*stride;
+                    assert_eq!(
+                        bytes[pad.clone()],
+                        raw[p][row * stride..][pad],
+                        "{format:?}"
+                    );
+                    if format == PixelFormat::Bgrx {
+                        for x in 0..SIZE.0 {
+                            assert_eq!(bytes[x * 4 + 3], raw[p][row * stride + x * 4 + 3]);
+                        }
+                    }
+                }
+            }
+            let rms = |a: &[Vec<u8>], b: &[Vec<u8>]| {
+                let d: Vec<f32> = a[0]
+                    .iter()
+                    .zip(&b[0])
+                    .map(|(x, y)| *x as f32 - *y as f32)
+                    .collect();
+                (d.iter().map(|v| v * v).sum::<f32>() / d.len() as f32).sqrt()
+            };
+            if let Some((pr, po)) = &previous {
+                raw_change = rms(pr, &raw);
+                last_change = rms(po, &out);
+            }
+            previous = Some((raw, out));
+        }
+        assert!(
+            last_change < 0.6 * raw_change,
+            "{format:?}: change {raw_change:.2} -> {last_change:.2}"
+        );
+    }
+}
+
+#[test]
+fn the_share_of_a_new_frame_rises_smoothly_with_motion() {
+    assert_eq!(new_share(0.0), STILL_SHARE);
+    assert_eq!(new_share(STILL_RATIO), STILL_SHARE);
+    assert_eq!(new_share(MOVING_RATIO), 1.0);
+    assert_eq!(new_share(1e9), 1.0);
+    let mut last = 0.0;
+    for i in 0..100 {
+        let s = new_share(i as f32 * 0.1);
+        assert!(s >= last);
+        last = s;
+    }
+}
