@@ -5,8 +5,13 @@
 //!
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
-//!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter] [--format RGB|I420]
+//!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter] [--format RGB|I420] \
+//!     [--denoise]
 //! ```
+//!
+//! The element's `denoise` is off unless `--denoise` is given: the measures read
+//! the lighting change as output over input, pixel by pixel, and the noise the
+//! denoising removes counts in them (`lsydrelight_testkit::footage::relight`).
 //!
 //! `--format I420` feeds the element I420, as webcams deliver frames, and compares
 //! its output with the input after the same round trip through I420 and back;
@@ -164,19 +169,23 @@ fn measure(
     target: &Path,
     out: &Path,
     format: Format,
+    denoise: bool,
 ) -> Result<Measured, String> {
     // The element is fed the frames converted once, and its output is
     // compared with those frames converted back: feeding it frames that had
     // already been round the trip would convert them twice, and the second
     // round trip's loss (chroma filtered again) would count as its change.
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
-        relight(&input, model, target, format)?.into_iter().unzip();
+        relight(&input, model, target, format, denoise)?
+            .into_iter()
+            .unzip();
     let through_format = if format == Format::Rgb {
         None
     } else {
-        let (relit, _): (Vec<RgbImage>, Vec<_>) = relight(&input, model, target, Format::Rgb)?
-            .into_iter()
-            .unzip();
+        let (relit, _): (Vec<RgbImage>, Vec<_>) =
+            relight(&input, model, target, Format::Rgb, denoise)?
+                .into_iter()
+                .unzip();
         Some((through(input.clone(), format)?, through(relit, format)?))
     };
     let input = through(input, format)?;
@@ -284,6 +293,7 @@ fn main() -> Result<(), String> {
     let frames: usize =
         flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
     let format = flag("--format").map_or(Ok(Format::Rgb), |f| Format::parse(&f))?;
+    let denoise = std::env::args().any(|a| a == "--denoise");
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
@@ -308,6 +318,7 @@ fn main() -> Result<(), String> {
             &target,
             &out,
             format,
+            denoise,
         )?;
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
@@ -329,7 +340,16 @@ fn main() -> Result<(), String> {
         let input = read_y4m(&dir.join("face.y4m"), frames)?;
         let truth = read_y4m(&dir.join("truth-sunset.y4m"), frames)?;
         let target = dir.join("target-sunset.png");
-        let m = measure(recording, input, Some(truth), &model, &target, &out, format)?;
+        let m = measure(
+            recording,
+            input,
+            Some(truth),
+            &model,
+            &target,
+            &out,
+            format,
+            denoise,
+        )?;
         let t = m.truth.expect("a recording has its truth");
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",

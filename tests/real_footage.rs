@@ -38,7 +38,7 @@ fn media(name: &str) -> Option<PathBuf> {
 /// the input after the same round trip through `format`.
 fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<(f64, f64, (f64, f64))> {
     let model = gstlsydrelight::paths::default_model();
-    let output = relight(input, &model, &target, format).unwrap();
+    let output = relight(input, &model, &target, format, false).unwrap();
     through(input.to_vec(), format)
         .unwrap()
         .iter()

@@ -115,19 +115,20 @@ pub fn through(frames: Vec<RgbImage>, format: Format) -> Result<Vec<RgbImage>, S
 /// with the square the element relit (its `face` region-of-interest meta; None
 /// when it relit none).
 ///
-/// The element's denoising is off (`denoise=false`): [`crate::quality`]'s
-/// measures read the lighting change as the output over the input, pixel by
-/// pixel, and denoising changes each pixel by the noise it removes, which they
-/// would read as blotches and steps of the change (on the film clip's near-black
-/// pixels most). These runs measure the lighting change alone.
+/// `denoise` sets the element's property of that name. The measures of
+/// [`crate::quality`] read the lighting change as the output over the input,
+/// pixel by pixel, and denoising changes each pixel by the noise it removes,
+/// which they read as blotches and steps of the change (on the film clip's
+/// near-black pixels most): runs that measure the lighting change alone turn it off.
 pub fn relight(
     frames: &[RgbImage],
     model: &Path,
     target: &Path,
     format: Format,
+    denoise: bool,
 ) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
     let element = format!(
-        "lsydrelight name=r denoise=false model-location=\"{}\" target-location=\"{}\"",
+        "lsydrelight name=r denoise={denoise} model-location=\"{}\" target-location=\"{}\"",
         model.display(),
         target.display()
     );
