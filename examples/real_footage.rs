@@ -161,31 +161,44 @@ fn before_after(before: &RgbImage, after: &RgbImage) -> RgbImage {
     }
 }
 
+/// How the element is run on every clip: the model, the target, the format
+/// it is fed and whether it denoises.
+struct Setup<'a> {
+    model: &'a Path,
+    target: &'a Path,
+    format: Format,
+    denoise: bool,
+}
+
+impl Setup<'_> {
+    fn relight(
+        &self,
+        input: &[RgbImage],
+        format: Format,
+    ) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+        relight(input, self.model, self.target, format, self.denoise)
+    }
+}
+
 fn measure(
     name: &str,
     input: Vec<RgbImage>,
     truth: Option<Vec<RgbImage>>,
-    model: &Path,
-    target: &Path,
+    setup: &Setup,
     out: &Path,
-    format: Format,
-    denoise: bool,
 ) -> Result<Measured, String> {
+    let format = setup.format;
     // The element is fed the frames converted once, and its output is
     // compared with those frames converted back: feeding it frames that had
     // already been round the trip would convert them twice, and the second
     // round trip's loss (chroma filtered again) would count as its change.
     let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
-        relight(&input, model, target, format, denoise)?
-            .into_iter()
-            .unzip();
+        setup.relight(&input, format)?.into_iter().unzip();
     let through_format = if format == Format::Rgb {
         None
     } else {
         let (relit, _): (Vec<RgbImage>, Vec<_>) =
-            relight(&input, model, target, Format::Rgb, denoise)?
-                .into_iter()
-                .unzip();
+            setup.relight(&input, Format::Rgb)?.into_iter().unzip();
         Some((through(input.clone(), format)?, through(relit, format)?))
     };
     let input = through(input, format)?;
@@ -293,7 +306,12 @@ fn main() -> Result<(), String> {
     let frames: usize =
         flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
     let format = flag("--format").map_or(Ok(Format::Rgb), |f| Format::parse(&f))?;
-    let denoise = std::env::args().any(|a| a == "--denoise");
+    let setup = Setup {
+        model: &model,
+        target: &target,
+        format,
+        denoise: std::env::args().any(|a| a == "--denoise"),
+    };
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];
@@ -310,16 +328,7 @@ fn main() -> Result<(), String> {
                 path.display()
             ));
         }
-        let m = measure(
-            name,
-            decode(&path, frames)?,
-            None,
-            &model,
-            &target,
-            &out,
-            format,
-            denoise,
-        )?;
+        let m = measure(name, decode(&path, frames)?, None, &setup, &out)?;
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} |",
             m.name, m.frames, m.box_edge_max, m.box_edge_median, m.mottling_median, m.pumping
@@ -340,16 +349,11 @@ fn main() -> Result<(), String> {
         let input = read_y4m(&dir.join("face.y4m"), frames)?;
         let truth = read_y4m(&dir.join("truth-sunset.y4m"), frames)?;
         let target = dir.join("target-sunset.png");
-        let m = measure(
-            recording,
-            input,
-            Some(truth),
-            &model,
-            &target,
-            &out,
-            format,
-            denoise,
-        )?;
+        let own_target = Setup {
+            target: &target,
+            ..setup
+        };
+        let m = measure(recording, input, Some(truth), &own_target, &out)?;
         let t = m.truth.expect("a recording has its truth");
         println!(
             "| {} | {} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} | {:.2} |",
