@@ -92,18 +92,18 @@ struct Scratch {
     /// the area: the first pass's result, which the second needs with the
     /// noise's level learnt from the whole frame.
     motion: Vec<f32>,
-    /// The last rows' smooth values and squared differences, by row modulo 3.
-    smooth: [Vec<f32>; 3],
+    /// Smooth value per sample of the area, found in the first pass.
+    smooth: Vec<f32>,
+    /// The last rows' squared differences, by row modulo 3.
     squared: [Vec<f32>; 3],
     /// A row's vertical sums of samples, and of floats.
     sums: Vec<u16>,
     column: Vec<f32>,
     /// Per band of the smooth value, local mean squared differences seen.
     seen: [Vec<f32>; BANDS],
-    /// A row's frame x coordinates, weights, results, and the dither of each
+    /// A row's frame x coordinates, results, and the dither of each
     /// row of its pattern.
     xs: Vec<f32>,
-    weight: Vec<f32>,
     relit: Vec<f32>,
     dither: [Vec<f32>; DITHER_ROWS],
 }
@@ -184,17 +184,40 @@ impl Disc {
     }
 
     /// How much of the denoising shows at each frame point (`xs[i]`, `y`), into `out`.
-    #[inline(always)]
+    #[cfg(test)]
     fn weights(&self, xs: &[f32], y: f32, out: &mut [f32]) {
-        let dy = y - self.centre[1];
-        // `fade`, written without branches so that the loop vectorises.
-        let scale = 1.0 / self.feather.max(1e-6);
+        let row = self.row(y);
         for (o, &x) in out.iter_mut().zip(xs) {
-            let dx = x - self.centre[0];
-            let distance = (dx * dx + dy * dy).sqrt() - self.inner;
-            let t = (1.0 - distance * scale).clamp(0.0, 1.0);
-            *o = self.strength * t * t * (3.0 - 2.0 * t);
+            *o = row.weight(x);
         }
+    }
+
+    /// What the weights along frame row `y` have in common.
+    #[inline(always)]
+    fn row(&self, y: f32) -> DiscRow<'_> {
+        DiscRow {
+            disc: self,
+            dy: y - self.centre[1],
+            scale: 1.0 / self.feather.max(1e-6),
+        }
+    }
+
+    /// Of the `w` samples from `x0` of a plane's row at frame height `y`,
+    /// subsampled by `sub`, the first and the end of those the denoising
+    /// shows at: beyond them its weight is 0. Found with a margin of 2
+    /// samples, which the rounding of the weights' distances never crosses.
+    fn span(&self, y: f32, x0: usize, w: usize, sub: usize) -> (usize, usize) {
+        let reach = self.inner + self.feather + 2.0 * sub as f32;
+        let dy = y - self.centre[1];
+        if dy.abs() >= reach {
+            return (0, 0);
+        }
+        let half = (reach * reach - dy * dy).sqrt();
+        // Sample x is at frame x (x0 + x + 0.5) · sub.
+        let column = |frame_x: f32| frame_x / sub as f32 - 0.5 - x0 as f32;
+        let first = column(self.centre[0] - half).floor().max(0.0) as usize;
+        let end = (column(self.centre[0] + half).ceil().max(0.0) as usize + 1).min(w);
+        (first.min(end), end)
     }
 
     /// The plane's samples the disc reaches, subsampled by `sub`, within a
@@ -208,6 +231,26 @@ impl Disc {
         };
         let ((x, w), (y, h)) = (span(self.centre[0], size.0), span(self.centre[1], size.1));
         [x, y, w, h]
+    }
+}
+
+/// The disc along one frame row.
+struct DiscRow<'a> {
+    disc: &'a Disc,
+    /// Distance of the row from the centre, and 1 over the fade's width.
+    dy: f32,
+    scale: f32,
+}
+
+impl DiscRow<'_> {
+    /// How much of the denoising shows at frame x `x` of the row.
+    #[inline(always)]
+    fn weight(&self, x: f32) -> f32 {
+        // `fade`, written without branches so that a loop of it vectorises.
+        let dx = x - self.disc.centre[0];
+        let distance = (dx * dx + self.dy * self.dy).sqrt() - self.disc.inner;
+        let t = (1.0 - distance * self.scale).clamp(0.0, 1.0);
+        self.disc.strength * t * t * (3.0 - 2.0 * t)
     }
 }
 
@@ -299,7 +342,8 @@ impl ChannelState {
             }
         }
         s.motion.resize(n, 0.0);
-        for buffer in s.smooth.iter_mut().chain(&mut s.squared) {
+        s.smooth.resize(n, 0.0);
+        for buffer in &mut s.squared {
             buffer.resize(w, 0.0);
         }
         s.sums.resize(w, 0);
@@ -309,9 +353,9 @@ impl ChannelState {
         // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
         let step = (n / NOISE_SAMPLES).max(3);
         for y in 0..h {
-            let smooth = &mut s.smooth[y % 3];
-            smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
             let row = y * w..(y + 1) * w;
+            let smooth = &mut s.smooth[row.clone()];
+            smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
             for (((squared, &b), &smooth), &past) in (s.squared[y % 3].iter_mut())
                 .zip(&s.bytes[row.clone()])
                 .zip(&*smooth)
@@ -333,16 +377,8 @@ impl ChannelState {
         }
         let Some(noise) = update_noise(&mut self.noise, &mut s.seen) else {
             // Nothing to filter against: the detail is kept, the frame passes.
-            for y in 0..h {
-                let smooth = &mut s.smooth[0];
-                smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
-                let row = y * w..(y + 1) * w;
-                for ((past, &b), &smooth) in (self.detail[row.clone()].iter_mut())
-                    .zip(&s.bytes[row])
-                    .zip(&*smooth)
-                {
-                    *past = b as f32 - smooth;
-                }
+            for ((past, &b), &smooth) in (self.detail.iter_mut()).zip(&s.bytes).zip(&s.smooth) {
+                *past = b as f32 - smooth;
             }
             return;
         };
@@ -356,36 +392,47 @@ impl ChannelState {
             row.clear();
             row.extend((0..w).map(|x| dither(x0 + x, r)));
         }
-        s.weight.resize(w, 0.0);
         s.relit.resize(w, 0.0);
         for y in 0..h {
-            let smooth = &mut s.smooth[0];
-            smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
-            disc.weights(&s.xs, ((y0 + y) as f32 + 0.5) * sub, &mut s.weight);
-            let row = y * w..(y + 1) * w;
-            let dither = &s.dither[(y0 + y) % DITHER_ROWS];
-            for (((relit, past), (&b, &smooth)), ((&motion, &weight), &dither)) in
-                (s.relit.iter_mut().zip(&mut self.detail[row.clone()]))
-                    .zip(s.bytes[row.clone()].iter().zip(&*smooth))
-                    .zip(s.motion[row].iter().zip(&s.weight).zip(dither))
+            let frame_y = ((y0 + y) as f32 + 0.5) * sub;
+            // The samples the denoising shows at; elsewhere only the filtered
+            // detail changes, the frame's bytes stay as they are.
+            let (first, end) = disc.span(frame_y, x0, w, plane.subsample);
+            let at = |range: std::ops::Range<usize>| (y * w + range.start)..(y * w + range.end);
+            for part in [at(0..first), at(end..w)] {
+                for ((past, &b), (&smooth, &motion)) in (self.detail[part.clone()].iter_mut())
+                    .zip(&s.bytes[part.clone()])
+                    .zip(s.smooth[part.clone()].iter().zip(&s.motion[part]))
+                {
+                    *past = filtered(*past, b as f32 - smooth, motion, smooth, &inverse);
+                }
+            }
+            if first == end {
+                continue;
+            }
+            let relit = &mut s.relit[first..end];
+            let disc_row = disc.row(frame_y);
+            let shown = at(first..end);
+            let dither = &s.dither[(y0 + y) % DITHER_ROWS][first..end];
+            for (((relit, past), (&b, &smooth)), ((&motion, &x), &dither)) in
+                (relit.iter_mut().zip(&mut self.detail[shown.clone()]))
+                    .zip(s.bytes[shown.clone()].iter().zip(&s.smooth[shown.clone()]))
+                    .zip(s.motion[shown].iter().zip(&s.xs[first..end]).zip(dither))
             {
                 let v = b as f32;
                 let d = v - smooth;
-                let difference = d - *past;
-                let share = new_share(motion * band_value(smooth, &inverse));
-                let filtered = *past + share * difference;
-                *past = if difference.is_nan() { d } else { filtered };
-                *relit = v + weight * (*past - d) + dither;
+                *past = filtered(*past, d, motion, smooth, &inverse);
+                *relit = v + disc_row.weight(x) * (*past - d) + dither;
             }
-            let start = (y0 + y) * plane.stride + x0 * plane.bytes + lane;
+            let start = (y0 + y) * plane.stride + (x0 + first) * plane.bytes + lane;
             if plane.bytes == 1 {
-                let bytes = &mut data[start..start + w];
-                for (b, &r) in bytes.iter_mut().zip(&s.relit) {
+                let bytes = &mut data[start..start + relit.len()];
+                for (b, &r) in bytes.iter_mut().zip(&*relit) {
                     *b = round_to_u8(r);
                 }
             } else {
                 let bytes = data[start..].iter_mut().step_by(plane.bytes);
-                for (b, &r) in bytes.zip(&s.relit) {
+                for (b, &r) in bytes.zip(&*relit) {
                     *b = round_to_u8(r);
                 }
             }
@@ -397,23 +444,36 @@ impl ChannelState {
     /// area's that the frame before had detail at, into `s.seen` by band.
     #[inline(always)]
     fn motion_row(&self, y: usize, (w, h): (usize, usize), step: usize, s: &mut Scratch) {
+        const SPAN: usize = 2 * MOTION_RADIUS + 1;
         let (lo, hi) = (
             y.saturating_sub(MOTION_RADIUS),
             (y + MOTION_RADIUS + 1).min(h),
         );
-        s.column.copy_from_slice(&s.squared[lo % 3]);
-        for r in lo + 1..hi {
-            add_to(&mut s.column, &s.squared[r % 3]);
-        }
         let scale = 1.0 / (hi - lo) as f32;
-        s.column.iter_mut().for_each(|c| *c *= scale);
+        let (column, squared) = (&mut s.column, &s.squared);
+        // Added from the top, as the blur of a whole map adds its rows.
+        if hi - lo == SPAN {
+            let rows: [&[f32]; SPAN] = std::array::from_fn(|r| &squared[(lo + r) % 3][..]);
+            for (x, c) in column.iter_mut().enumerate() {
+                let mut sum = rows[0][x];
+                for row in &rows[1..] {
+                    sum += row[x];
+                }
+                *c = sum * scale;
+            }
+        } else {
+            column.copy_from_slice(&squared[lo % 3]);
+            for r in lo + 1..hi {
+                (column.iter_mut().zip(&squared[r % 3])).for_each(|(c, v)| *c += v);
+            }
+            column.iter_mut().for_each(|c| *c *= scale);
+        }
         let row = y * w..(y + 1) * w;
-        box_row(&s.column, MOTION_RADIUS, &mut s.motion[row.clone()]);
-        let smooth = &s.smooth[y % 3];
+        box_row::<SPAN>(&s.column, &mut s.motion[row.clone()]);
         let mut i = row.start.div_ceil(step) * step;
         while i < row.end {
             if !self.detail[i].is_nan() {
-                s.seen[band(smooth[i - row.start])].push(s.motion[i]);
+                s.seen[band(s.smooth[i])].push(s.motion[i]);
             }
             i += step;
         }
@@ -458,54 +518,59 @@ fn smooth_row(
     column: &mut [f32],
     out: &mut [f32],
 ) {
+    const SPAN: usize = 2 * SPLIT_RADIUS + 1;
     let (lo, hi) = (
         y.saturating_sub(SPLIT_RADIUS),
         (y + SPLIT_RADIUS + 1).min(h),
     );
-    // Whole numbers: their sum is exact in any order, as a float or not.
-    let first = &bytes[lo * w..(lo + 1) * w];
-    sums.iter_mut().zip(first).for_each(|(s, &b)| *s = b as u16);
-    for r in lo + 1..hi {
-        let row = &bytes[r * w..(r + 1) * w];
-        sums.iter_mut().zip(row).for_each(|(s, &b)| *s += b as u16);
-    }
     let scale = 1.0 / (hi - lo) as f32;
-    column
-        .iter_mut()
-        .zip(&*sums)
-        .for_each(|(c, &s)| *c = s as f32 * scale);
-    box_row(column, SPLIT_RADIUS, out);
+    // Whole numbers: their sum is exact in any order, as a float or not.
+    if hi - lo == SPAN {
+        let rows: [&[u8]; SPAN] = std::array::from_fn(|r| &bytes[(lo + r) * w..(lo + r + 1) * w]);
+        for (x, c) in column.iter_mut().enumerate() {
+            let mut sum = rows[0][x] as u16;
+            for row in &rows[1..] {
+                sum += row[x] as u16;
+            }
+            *c = sum as f32 * scale;
+        }
+    } else {
+        let first = &bytes[lo * w..(lo + 1) * w];
+        sums.iter_mut().zip(first).for_each(|(s, &b)| *s = b as u16);
+        for r in lo + 1..hi {
+            let row = &bytes[r * w..(r + 1) * w];
+            sums.iter_mut().zip(row).for_each(|(s, &b)| *s += b as u16);
+        }
+        (column.iter_mut().zip(&*sums)).for_each(|(c, &s)| *c = s as f32 * scale);
+    }
+    box_row::<SPAN>(column, out);
 }
 
-/// A row's horizontal box blur, `radius` each way, shrinking at the ends.
+/// A row's horizontal box blur of `SPAN` samples, shrinking at the ends:
+/// the window's samples added from the left, then scaled.
 #[inline(always)]
-fn box_row(src: &[f32], radius: usize, dst: &mut [f32]) {
-    // Whole runs of the row shifted against each other are added, a loop that
-    // vectorises, rather than keeping a running sum, whose every step waits
-    // for the one before. The radius is small.
+fn box_row<const SPAN: usize>(src: &[f32], dst: &mut [f32]) {
+    let radius = SPAN / 2;
     let w = src.len();
-    let span = 2 * radius + 1;
-    if w >= span {
+    if w >= SPAN {
         // Samples with the whole window: dst[k] sums src[k - radius..=k + radius].
-        let inner = &mut dst[radius..w - radius];
-        inner.copy_from_slice(&src[..w + 1 - span]);
-        for shift in 1..span {
-            add_to(inner, &src[shift..shift + w + 1 - span]);
+        let m = w + 1 - SPAN;
+        let inner = &mut dst[radius..radius + m];
+        let shifted: [&[f32]; SPAN] = std::array::from_fn(|s| &src[s..s + m]);
+        let scale = 1.0 / SPAN as f32;
+        for (k, o) in inner.iter_mut().enumerate() {
+            let mut sum = shifted[0][k];
+            for run in &shifted[1..] {
+                sum += run[k];
+            }
+            *o = sum * scale;
         }
-        let scale = 1.0 / span as f32;
-        inner.iter_mut().for_each(|s| *s *= scale);
     }
     // The ends' shrunken windows (every sample, in a row narrower than one).
     for k in (0..radius.min(w)).chain(radius.max(w.saturating_sub(radius))..w) {
         let (lo, hi) = (k.saturating_sub(radius), (k + radius + 1).min(w));
         dst[k] = src[lo..hi].iter().sum::<f32>() / (hi - lo) as f32;
     }
-}
-
-/// `sum += values`, element by element.
-#[inline(always)]
-fn add_to(sum: &mut [f32], values: &[f32]) {
-    sum.iter_mut().zip(values).for_each(|(s, v)| *s += v);
 }
 
 /// Updates `noise`, the noise's level per band of the smooth value, from the
@@ -544,6 +609,17 @@ fn update_noise(
             .map(|&(_, n)| n)
             .expect("at least one band is known")
     }))
+}
+
+/// The filtered detail of a sample of detail `d` and smooth value `smooth`,
+/// whose filtered detail was `past` (NaN where there was none), at a local
+/// mean squared difference `motion`; `inverse` is 1 over the noise per band.
+#[inline(always)]
+fn filtered(past: f32, d: f32, motion: f32, smooth: f32, inverse: &[f32; BANDS]) -> f32 {
+    let difference = d - past;
+    let share = new_share(motion * band_value(smooth, inverse));
+    let filtered = past + share * difference;
+    if difference.is_nan() { d } else { filtered }
 }
 
 /// The band of [`LEVELS`] a smooth value lies in.
