@@ -2,8 +2,11 @@
 //! the element's `denoise`) and the paste (`LightingChange::apply`) on
 //! synthetic frames, without GStreamer, as the element runs them: the default
 //! full-height crop, the 96 px network and a feather of half the crop. The
-//! denoising is timed again round a followed face's smaller crop, a third of
-//! the frame's height (`denoise, face`), as its area grows with the crop's.
+//! full-height crop is what the crop rule (`face::CROP_SIDE`, 2.9 face
+//! heights) gives a face a third of the frame's height, a person close to the
+//! camera as in a call. The denoising, whose area grows with the crop's, is
+//! timed again round a crop a third of the frame's height (`denoise, small
+//! face`): a face a ninth of it, farther away.
 //!
 //! ```text
 //! cargo run --release --example paste_speed -- [--rounds 41]
@@ -29,8 +32,8 @@ const SIZES: [(&str, usize, usize); 4] = [
 const FORMATS: [PixelFormat; 3] = [PixelFormat::I420, PixelFormat::Nv12, PixelFormat::Bgrx];
 /// The default network's resolution.
 const RES: usize = 96;
-/// A followed face's crop, as a fraction of the frame's height.
-const FACE_CROP: f64 = 1.0 / 3.0;
+/// A small face's crop, as a fraction of the frame's height.
+const SMALL_FACE_CROP: f64 = 1.0 / 3.0;
 /// The element's default feather, as a fraction of the crop.
 const FEATHER: f64 = 0.5;
 const MATRIX: YuvMatrix = YuvMatrix::BT709_LIMITED;
@@ -53,11 +56,11 @@ struct Case {
     feather: usize,
     change: LightingChange,
     denoiser: DetailDenoiser,
-    face_crop: Crop,
-    face_denoiser: DetailDenoiser,
+    small_crop: Crop,
+    small_denoiser: DetailDenoiser,
     crop_ms: Vec<f64>,
     denoise_ms: Vec<f64>,
-    face_ms: Vec<f64>,
+    small_ms: Vec<f64>,
     paste_ms: Vec<f64>,
 }
 
@@ -106,11 +109,11 @@ fn main() {
                 crop,
                 feather: (FEATHER * crop.size as f64).round() as usize,
                 denoiser: DetailDenoiser::default(),
-                face_crop: Crop::centred(width, height, 0.5, 0.5, FACE_CROP),
-                face_denoiser: DetailDenoiser::default(),
+                small_crop: Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP),
+                small_denoiser: DetailDenoiser::default(),
                 crop_ms: Vec::with_capacity(rounds),
                 denoise_ms: Vec::with_capacity(rounds),
-                face_ms: Vec::with_capacity(rounds),
+                small_ms: Vec::with_capacity(rounds),
                 paste_ms: Vec::with_capacity(rounds),
             });
         }
@@ -129,10 +132,10 @@ fn main() {
             case.denoise_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
-            let feather = (FEATHER * case.face_crop.size as f64).round() as usize;
-            case.face_denoiser
-                .apply(&mut case.buffers.frame_mut(), case.face_crop, feather, 1.0);
-            case.face_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            let feather = (FEATHER * case.small_crop.size as f64).round() as usize;
+            case.small_denoiser
+                .apply(&mut case.buffers.frame_mut(), case.small_crop, feather, 1.0);
+            case.small_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
             case.change
@@ -144,7 +147,7 @@ fn main() {
     println!("{rounds} rounds, ms per frame: median (min-max)");
     println!(
         "{:<12} {:>26} {:>26} {:>26} {:>26}",
-        "", "crop", "denoise", "paste", "denoise, face"
+        "", "crop", "denoise", "paste", "denoise, small face"
     );
     for case in &mut cases {
         println!(
@@ -153,7 +156,7 @@ fn main() {
             summary(&mut case.crop_ms),
             summary(&mut case.denoise_ms),
             summary(&mut case.paste_ms),
-            summary(&mut case.face_ms)
+            summary(&mut case.small_ms)
         );
     }
 }
