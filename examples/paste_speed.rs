@@ -1,7 +1,12 @@
 //! Times the crop (`sample_crop`), the denoising (`DetailDenoiser::apply`,
 //! the element's `denoise`) and the paste (`LightingChange::apply`) on
 //! synthetic frames, without GStreamer, as the element runs them: the default
-//! full-height crop, the 96 px network and a feather of half the crop.
+//! full-height crop, the 96 px network and a feather of half the crop. The
+//! full-height crop is what the crop rule (`face::CROP_SIDE`, 2.9 face
+//! heights) gives a face a third of the frame's height, a person close to the
+//! camera as in a call. The denoising, whose area grows with the crop's, is
+//! timed again round a crop a third of the frame's height (`denoise, small
+//! face`): a face a ninth of it, farther away.
 //!
 //! ```text
 //! cargo run --release --example paste_speed -- [--rounds 41]
@@ -27,6 +32,8 @@ const SIZES: [(&str, usize, usize); 4] = [
 const FORMATS: [PixelFormat; 3] = [PixelFormat::I420, PixelFormat::Nv12, PixelFormat::Bgrx];
 /// The default network's resolution.
 const RES: usize = 96;
+/// A small face's crop, as a fraction of the frame's height.
+const SMALL_FACE_CROP: f64 = 1.0 / 3.0;
 /// The element's default feather, as a fraction of the crop.
 const FEATHER: f64 = 0.5;
 const MATRIX: YuvMatrix = YuvMatrix::BT709_LIMITED;
@@ -49,8 +56,11 @@ struct Case {
     feather: usize,
     change: LightingChange,
     denoiser: DetailDenoiser,
+    small_crop: Crop,
+    small_denoiser: DetailDenoiser,
     crop_ms: Vec<f64>,
     denoise_ms: Vec<f64>,
+    small_ms: Vec<f64>,
     paste_ms: Vec<f64>,
 }
 
@@ -99,8 +109,11 @@ fn main() {
                 crop,
                 feather: (FEATHER * crop.size as f64).round() as usize,
                 denoiser: DetailDenoiser::default(),
+                small_crop: Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP),
+                small_denoiser: DetailDenoiser::default(),
                 crop_ms: Vec::with_capacity(rounds),
                 denoise_ms: Vec::with_capacity(rounds),
+                small_ms: Vec::with_capacity(rounds),
                 paste_ms: Vec::with_capacity(rounds),
             });
         }
@@ -119,6 +132,12 @@ fn main() {
             case.denoise_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
+            let feather = (FEATHER * case.small_crop.size as f64).round() as usize;
+            case.small_denoiser
+                .apply(&mut case.buffers.frame_mut(), case.small_crop, feather, 1.0);
+            case.small_ms.push(start.elapsed().as_secs_f64() * 1e3);
+
+            let start = Instant::now();
             case.change
                 .apply(&mut case.buffers.frame_mut(), case.crop, case.feather);
             case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
@@ -127,16 +146,17 @@ fn main() {
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
     println!(
-        "{:<12} {:>26} {:>26} {:>26}",
-        "", "crop", "denoise", "paste"
+        "{:<12} {:>26} {:>26} {:>26} {:>26}",
+        "", "crop", "denoise", "paste", "denoise, small face"
     );
     for case in &mut cases {
         println!(
-            "{:<12} {:>26} {:>26} {:>26}",
+            "{:<12} {:>26} {:>26} {:>26} {:>26}",
             case.name,
             summary(&mut case.crop_ms),
             summary(&mut case.denoise_ms),
-            summary(&mut case.paste_ms)
+            summary(&mut case.paste_ms),
+            summary(&mut case.small_ms)
         );
     }
 }

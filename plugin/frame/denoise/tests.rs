@@ -271,3 +271,74 @@ fn the_share_of_a_new_frame_rises_smoothly_with_motion() {
         last = s;
     }
 }
+
+/// A frame of `format` and `size`: the scene moving by `shift`, noise of
+/// `sigma` levels, the same in every byte of a pixel but for an offset.
+fn noisy_frame(
+    format: PixelFormat,
+    size: (usize, usize),
+    shift: f32,
+    sigma: f32,
+    noise: &mut Noise,
+) -> OwnedFrame {
+    let mut i = 0usize;
+    OwnedFrame::new(format, size, 3, YuvMatrix::BT601_LIMITED, || {
+        i += 1;
+        let (x, y) = (i % 211, i / 211);
+        (scene(x, y, shift) - 20.0 + 7.0 * (i % 3) as f32 + sigma * noise.normal())
+            .round()
+            .clamp(0.0, 255.0) as u8
+    })
+}
+
+#[test]
+fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
+    // Every format, sizes odd and even, a face that moves, grows, leaves the
+    // frame's edge, fades, disappears and comes back, and a reset: the fast
+    // denoiser must match the plain one's bytes exactly, and its filtered
+    // detail, which carries into every later frame.
+    for format in [
+        PixelFormat::I420,
+        PixelFormat::Nv12,
+        PixelFormat::Y444,
+        PixelFormat::Bgrx,
+        PixelFormat::Rgb,
+    ] {
+        for size in [(96, 64), (75, 53)] {
+            let mut fast = DetailDenoiser::default();
+            let mut plain = reference::ReferenceDenoiser::default();
+            let mut noise = Noise(17);
+            for i in 0..24 {
+                let shift = if i < 8 { 0.0 } else { 1.5 * (i - 8) as f32 };
+                let sigma = if i < 12 { 3.0 } else { 6.0 };
+                let mut a = noisy_frame(format, size, shift, sigma, &mut noise);
+                let mut b = noisy_frame(format, size, shift, sigma, &mut noise);
+                for (pa, pb) in b.planes.iter_mut().zip(&a.planes) {
+                    pa.0.copy_from_slice(&pb.0);
+                }
+                let crop = Crop {
+                    x: [10, 10, 12, 0, 40, 60, 2][i % 7],
+                    y: [8, 8, 9, 0, 20, 30, 4][i % 7],
+                    size: [40, 40, 44, 64, 50, 36, 20][i % 7],
+                };
+                let strength = [1.0, 1.0, 0.7, 1.0, 0.0, 1.0, 0.3, 1.0][i % 8];
+                if i == 17 {
+                    fast.reset();
+                    plain.reset();
+                }
+                fast.apply(&mut a.frame_mut(), crop, crop.size / 2, strength);
+                plain.apply(&mut b.frame_mut(), crop, crop.size / 2, strength);
+                for (p, (pa, pb)) in a.planes.iter().zip(&b.planes).enumerate() {
+                    assert!(pa.0 == pb.0, "{format:?} {size:?} frame {i} plane {p}");
+                }
+                assert_eq!(fast.channels.len(), plain.channels.len());
+                for (k, (f, p)) in fast.channels.iter().zip(&plain.channels).enumerate() {
+                    let same = f.detail.len() == p.detail.len()
+                        && (f.detail.iter().zip(&p.detail))
+                            .all(|(x, y)| x.to_bits() == y.to_bits() || x.is_nan() && y.is_nan());
+                    assert!(same, "{format:?} {size:?} frame {i} channel {k}: detail");
+                }
+            }
+        }
+    }
+}
