@@ -15,6 +15,7 @@
 //! Images are packed 8-bit sRGB ([`RgbImage`]).
 
 use deskstage::monitor::RgbImage;
+use gstlsydrelight::face::{CROP_LIFT, CROP_SIDE};
 
 /// Added to sRGB values in [0, 1] before taking logs: two levels, so the
 /// rounding of near-black pixels does not count as a large ratio.
@@ -26,6 +27,24 @@ pub struct Region {
     pub x: usize,
     pub y: usize,
     pub size: usize,
+}
+
+impl Region {
+    /// The face inside a square the element relit, by the crop rule
+    /// (`gstlsydrelight::face::crop_from_face`) run backwards: a square one
+    /// face height across, [`CROP_LIFT`] face heights below the relit square's
+    /// centre. The relit square is [`CROP_SIDE`] face heights across and holds
+    /// the hair, the neck and the room round the face as well.
+    pub fn face_within(self) -> Region {
+        let face = self.size as f32 / CROP_SIDE;
+        let centre = |start: usize| start as f32 + self.size as f32 / 2.0;
+        let corner = |c: f32| (c - face / 2.0).max(0.0).round() as usize;
+        Region {
+            x: corner(centre(self.x)),
+            y: corner(centre(self.y) + CROP_LIFT * face),
+            size: (face.round() as usize).max(1),
+        }
+    }
 }
 
 /// Per pixel: the natural log of output over input of `value(pixel)`.
@@ -274,6 +293,25 @@ mod tests {
             height: h,
             data: (0..w * h).flat_map(|i| f(i % w, i / w)).collect(),
         }
+    }
+
+    #[test]
+    fn the_face_within_a_relit_square_is_the_crop_rule_backwards() {
+        // A face 100 px high centred at (155, 187) gets a 290 px square
+        // centred 22 px above it.
+        let square = Region {
+            x: 10,
+            y: 20,
+            size: 290,
+        };
+        assert_eq!(
+            square.face_within(),
+            Region {
+                x: 105,
+                y: 137,
+                size: 100
+            }
+        );
     }
 
     #[test]
