@@ -195,15 +195,19 @@ fn nothing_changes_beyond_the_fade_or_at_strength_zero() {
 /// Every plane's bytes of a frame.
 type Planes = Vec<Vec<u8>>;
 
+/// One format of each layout: planar and semi-planar YUV with subsampled
+/// chroma, planar YUV without, packed RGB with and without padding.
+const FORMATS: [PixelFormat; 5] = [
+    PixelFormat::I420,
+    PixelFormat::Nv12,
+    PixelFormat::Y444,
+    PixelFormat::Bgrx,
+    PixelFormat::Rgb,
+];
+
 #[test]
 fn every_format_is_denoised_and_padding_kept() {
-    for format in [
-        PixelFormat::I420,
-        PixelFormat::Nv12,
-        PixelFormat::Y444,
-        PixelFormat::Bgrx,
-        PixelFormat::Rgb,
-    ] {
+    for format in FORMATS {
         let mut denoiser = DetailDenoiser::default();
         let mut noise = Noise(9);
         let mut last_change = 0.0;
@@ -297,13 +301,7 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
     // frame's edge, fades, disappears and comes back, and a reset: the fast
     // denoiser must match the plain one's bytes exactly, and its filtered
     // detail, which carries into every later frame.
-    for format in [
-        PixelFormat::I420,
-        PixelFormat::Nv12,
-        PixelFormat::Y444,
-        PixelFormat::Bgrx,
-        PixelFormat::Rgb,
-    ] {
+    for format in FORMATS {
         for size in [(96, 64), (75, 53)] {
             let mut fast = DetailDenoiser::default();
             let mut plain = reference::ReferenceDenoiser::default();
