@@ -6,12 +6,16 @@
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
 //!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter] [--format RGB|I420] \
-//!     [--denoise]
+//!     [--denoise true|false]
 //! ```
 //!
-//! The element's `denoise` is off unless `--denoise` is given: the measures read
-//! the lighting change as output over input, pixel by pixel, and the noise the
-//! denoising removes counts in them (`lsydrelight_testkit::footage::relight`).
+//! The element's `denoise` is on, as by default, unless `--denoise false` is
+//! given, or the format is I420. The measures read the lighting change as
+//! output over input, pixel by pixel, so with the denoising on they compare the
+//! output with the input as the element's denoising left it, filtered again by
+//! the element's own code (`lsydrelight_testkit::footage::denoised`, RGB only);
+//! below the tables the same measures read what the denoising alone changed.
+//! The before/after images show the input as it came.
 //!
 //! `--format I420` feeds the element I420, as webcams deliver frames, and compares
 //! its output with the input after the same round trip through I420 and back;
@@ -37,7 +41,7 @@ use deskstage::monitor::RgbImage;
 use lsydrelight_testkit::{
     checkout,
     flags::flag,
-    footage::{Format, decode, read_y4m, relight, through},
+    footage::{Format, Relit, decode, denoised, read_y4m, relight, through},
     init,
     quality::{
         BoxEdge, Region, box_edge, box_edge_score, change_map, mean_level, mottling,
@@ -64,7 +68,11 @@ struct Measured {
     /// Fed another format than RGB: the element fed RGB instead, its output
     /// and its input both then round the trip through the format, scored the
     /// same way: the largest box edge and the median mottling.
-    through_format: Option<(f64, f64)>,
+    through_format: Option<(f64, f64, f64)>,
+    /// With the denoising on, what it changed alone (the input against the
+    /// input denoised), by the same measures: the largest box edge and the
+    /// median mottling over the face.
+    denoising: Option<(f64, f64)>,
     /// Against the ground truth, where there is one: RMSE (0-255) of the output
     /// over the relit square and over the whole frame, and the same for the input.
     truth: Option<[f64; 4]>,
@@ -108,19 +116,25 @@ fn rmse(a: &RgbImage, b: &RgbImage, region: Option<Region>) -> f64 {
 /// Edges, in levels of input luma, of the bands the mottling is broken down by.
 const LUMA_BANDS: [f64; 3] = [8.0, 16.0, 64.0];
 
-/// One frame's mottling, and per band of input luma its share of the square
-/// and of the mottling's sum of squares.
+/// One frame's mottling over the face, and per band of input luma its share
+/// of the face and of the mottling's sum of squares.
 type MottlingByLuma = (f64, Vec<(f64, f64)>);
 
-/// Per band of input luma (median over the frames): its share of the
-/// square, its share of the mottling's sum of squares and the mottling over
-/// its pixels alone.
+/// Per band of input luma (median over the frames): its share of the face
+/// (the issue's measure: [`Region::face_within`] the relit square), its share
+/// of the mottling's sum of squares and the mottling over its pixels alone.
 fn mottling_sources(input: &[RgbImage], output: &[RgbImage], regions: &[Region]) -> String {
     let frames: Vec<MottlingByLuma> = input
         .iter()
         .zip(output)
         .zip(regions)
-        .map(|((i, o), &r)| (mottling(i, o, r), mottling_by_luma(i, o, r, &LUMA_BANDS)))
+        .map(|((i, o), &r)| {
+            let face = r.face_within();
+            (
+                mottling(i, o, face),
+                mottling_by_luma(i, o, face, &LUMA_BANDS),
+            )
+        })
         .collect();
     let of = |f: &dyn Fn(&MottlingByLuma) -> f64| median(frames.iter().map(f).collect());
     let names = ["under 8", "8-16", "16-64", "64 up"];
@@ -137,7 +151,7 @@ fn mottling_sources(input: &[RgbImage], output: &[RgbImage], regions: &[Region])
                 }
             });
             format!(
-                "{name}: {:.0}% of the square, {:.0}% of the sum, {rms:.2}%",
+                "{name}: {:.0}% of the face, {:.0}% of the sum, {rms:.2}%",
                 100.0 * of(&|(_, bands)| bands[b].0),
                 100.0 * of(&|(_, bands)| bands[b].1),
             )
@@ -194,7 +208,7 @@ impl Setup<'_> {
         &self,
         input: &[RgbImage],
         format: Format,
-    ) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+    ) -> Result<Vec<(RgbImage, Option<Relit>)>, String> {
         relight(input, self.model, self.target, format, self.denoise)
     }
 }
@@ -211,7 +225,7 @@ fn measure(
     // compared with those frames converted back: feeding it frames that had
     // already been round the trip would convert them twice, and the second
     // round trip's loss (chroma filtered again) would count as its change.
-    let (output, regions): (Vec<RgbImage>, Vec<Option<Region>>) =
+    let (output, relits): (Vec<RgbImage>, Vec<Option<Relit>>) =
         setup.relight(&input, format)?.into_iter().unzip();
     let through_format = if format == Format::Rgb {
         None
@@ -222,12 +236,31 @@ fn measure(
     };
     let input = through(input, format)?;
     // The face measures look at the square the element relit.
-    let regions: Vec<Region> = regions
-        .into_iter()
+    let regions: Vec<Region> = relits
+        .iter()
         .zip(&input)
-        .map(|(r, img)| r.unwrap_or_else(|| centred_square(img)))
+        .map(|(r, img)| r.map_or_else(|| centred_square(img), |r| r.region))
         .collect();
-    let edges: Vec<BoxEdge> = input
+    // What the lighting change was applied to: the input, or the input as
+    // the denoising left it.
+    let changed = if setup.denoise {
+        denoised(&input, &relits)?
+    } else {
+        input.clone()
+    };
+    let denoising = setup.denoise.then(|| {
+        let edge = input
+            .iter()
+            .zip(&changed)
+            .map(|(i, d)| box_edge_score(i, d));
+        let face_mottled = input
+            .iter()
+            .zip(&changed)
+            .zip(&regions)
+            .map(|((i, d), &r)| mottling(i, d, r.face_within()));
+        (edge.fold(0.0, f64::max), median(face_mottled.collect()))
+    });
+    let edges: Vec<BoxEdge> = changed
         .iter()
         .zip(&output)
         .map(|(i, o)| box_edge(i, o))
@@ -247,7 +280,7 @@ fn measure(
     );
     let edges: Vec<f64> = edges.iter().map(|e| e.score).collect();
     // Over the relit square and over the face within it.
-    let (mottled, face_mottled): (Vec<f64>, Vec<f64>) = input
+    let (mottled, face_mottled): (Vec<f64>, Vec<f64>) = changed
         .iter()
         .zip(&output)
         .zip(&regions)
@@ -255,12 +288,17 @@ fn measure(
         .unzip();
     let through_format = through_format.map(|(i, o)| {
         let edge = i.iter().zip(&o).map(|(i, o)| box_edge_score(i, o));
-        let mottled = i
+        let (mottled, face_mottled): (Vec<f64>, Vec<f64>) = i
             .iter()
             .zip(&o)
             .zip(&regions)
-            .map(|((i, o), &r)| mottling(i, o, r));
-        (edge.fold(0.0, f64::max), median(mottled.collect()))
+            .map(|((i, o), &r)| (mottling(i, o, r), mottling(i, o, r.face_within())))
+            .unzip();
+        (
+            edge.fold(0.0, f64::max),
+            median(mottled),
+            median(face_mottled),
+        )
     });
     let means: Vec<(f64, f64)> = input
         .iter()
@@ -283,11 +321,12 @@ fn measure(
     deskstage::io::write_png(&image, &before_after(&input[shown], &output[shown]))
         .map_err(|e| format!("{}: {e}", image.display()))?;
     let image = out.join(format!("{name}-change.png"));
-    deskstage::io::write_png(&image, &change_map(&input[shown], &output[shown]))
+    deskstage::io::write_png(&image, &change_map(&changed[shown], &output[shown]))
         .map_err(|e| format!("{}: {e}", image.display()))?;
     Ok(Measured {
-        mottling_sources: mottling_sources(&input, &output, &regions),
+        mottling_sources: mottling_sources(&changed, &output, &regions),
         through_format,
+        denoising,
         worst,
         truth,
         name: name.to_string(),
@@ -304,13 +343,20 @@ fn measure(
 /// mottling comes from, and fed another format, the RGB path's output through it.
 fn notes_of(m: &Measured, format: Format) -> Vec<String> {
     let mut notes = vec![format!(
-        "{}: mottling by input luma (levels), median over the frames: {}",
+        "{}: mottling over the face by input luma (levels), median over the frames: {}",
         m.name, m.mottling_sources
     )];
-    if let Some((edge, mottled)) = m.through_format {
+    if let Some((edge, face_mottled)) = m.denoising {
+        notes.push(format!(
+            "{}: the denoising alone (the input against the input denoised): \
+             box edge max {edge:.1}%, mottling over the face {face_mottled:.2}%",
+            m.name
+        ));
+    }
+    if let Some((edge, mottled, face_mottled)) = m.through_format {
         notes.push(format!(
             "{}: the element fed RGB, its output and input both through {format:?}: \
-             box edge max {edge:.1}%, mottling median {mottled:.2}%",
+             box edge max {edge:.1}%, mottling median {mottled:.2}%, over the face {face_mottled:.2}%",
             m.name
         ));
     }
@@ -331,8 +377,28 @@ fn main() -> Result<(), String> {
         model: &model,
         target: &target,
         format,
-        denoise: std::env::args().any(|a| a == "--denoise"),
+        denoise: match flag("--denoise").as_deref() {
+            None => format == Format::Rgb,
+            Some("true") if format == Format::Rgb => true,
+            Some("true") => {
+                return Err(
+                    "--denoise true: the measures' input, denoised by the element's \
+                            code, is made in RGB only; use --format RGB"
+                        .into(),
+                );
+            }
+            Some("false") => false,
+            Some(other) => return Err(format!("--denoise {other}: true or false")),
+        },
     };
+    println!(
+        "The element fed {format:?}, denoising {}.",
+        if setup.denoise {
+            "on: the measures compare the output with the input as the denoising left it"
+        } else {
+            "off"
+        }
+    );
     init();
     std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
     let clips = [("astronaut", "astronaut.png"), ("megamind", "Megamind.avi")];

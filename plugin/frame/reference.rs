@@ -172,7 +172,12 @@ fn apply_yuv(field: &GainField, frame: &mut FrameMut) {
     let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
     for (y, &ty) in taps_y.iter().enumerate() {
         for (x, &tx) in taps_x.iter().enumerate() {
-            let extra = changes[(y / sub) * cw + x / sub][0] + dither(x, y);
+            let term = changes[(y / sub) * cw + x / sub][0];
+            let extra = if field.dithers_at(x as f32 + 0.5, y as f32 + 0.5) {
+                term + dither(x, y)
+            } else {
+                term
+            };
             let value = field.luma_at(data[y * stride + x], tx, ty, extra);
             data[y * stride + x] = value.round().clamp(0.0, 255.0) as u8;
         }
@@ -196,7 +201,15 @@ fn apply_channel(
     for (y, &ty) in taps_y.iter().enumerate() {
         for (x, &tx) in taps_x.iter().enumerate() {
             let at = y * stride + x * step + offset;
-            let value = field.at(channel, data[at], tx, ty, dither(x, y));
+            let frame = |v: usize| (v as f32 + 0.5) * subsample as f32;
+            let dithers = field.dithers_at(frame(x), frame(y));
+            let value = field.at(
+                channel,
+                data[at],
+                tx,
+                ty,
+                if dithers { dither(x, y) } else { 0.0 },
+            );
             data[at] = value.round().clamp(0.0, 255.0) as u8;
         }
     }

@@ -490,6 +490,40 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
 }
 
 #[test]
+fn the_dither_stays_off_the_face_and_covers_the_room() {
+    // A dark flat frame brightened evenly: over the face a smooth change
+    // rounds to one value (a dither there would grain the skin's dark
+    // pixels in colour); in the room round it, the same change is dithered,
+    // so a smooth change over a dark wall does not round to bands.
+    let (w, h) = (240, 160);
+    let crop = Crop {
+        x: 90,
+        y: 50,
+        size: 60,
+    };
+    // A fade far wider than the frame: the change is even over all of it.
+    let (_, after) = gained((w, h), |_, _| [4; 3], crop, 4000, |_, _| 1.5);
+    let green = |x: usize, y: usize| after[(y * w + x) * 3 + 1];
+    let inner = INNER_RADIUS * 60.0;
+    let mut on_face = std::collections::BTreeSet::new();
+    for y in 0..h {
+        for x in 0..w {
+            if (x as f32 + 0.5 - 120.0).hypot(y as f32 + 0.5 - 80.0) < 0.85 * inner {
+                on_face.insert(green(x, y));
+            }
+        }
+    }
+    assert_eq!(on_face.len(), 1, "the face's values: {on_face:?}");
+    assert!(on_face.first() > Some(&4), "the face is not brightened");
+    // One 4 x 4 block of the pattern, twice the inner radius from the centre.
+    let in_room: std::collections::BTreeSet<u8> = (78..82)
+        .flat_map(|y| (148..152).map(move |x| (x, y)))
+        .map(|(x, y)| green(x, y))
+        .collect();
+    assert!(in_room.len() > 1, "the room's block: {in_room:?}");
+}
+
+#[test]
 fn colour_noise_from_the_network_stays_out_of_the_frame() {
     // Each network pixel's colour off by up to ±15%, as the network's own
     // noise: the frame should take the mean tint, not the blotches.

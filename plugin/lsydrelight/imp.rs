@@ -496,6 +496,7 @@ impl LsydRelight {
             (region, outcome, setup_seconds, laps.lap())
         };
         let crop = region.crop;
+        let feather = (settings.feather * crop.size as f64).round() as usize;
         gst::debug!(
             CAT,
             imp = self,
@@ -507,7 +508,6 @@ impl LsydRelight {
             let mut frame =
                 gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
                     .map_err(|_| gst::FlowError::Error)?;
-            let feather = (settings.feather * crop.size as f64).round() as usize;
             let denoiser = settings.denoise.then_some(&mut state.denoiser);
             with_frame_mut(&mut frame, |fm| {
                 if let Some(denoiser) = denoiser {
@@ -521,6 +521,7 @@ impl LsydRelight {
         }
         laps.lap();
         let outcome_shows_face = outcome.change.is_some();
+        let shown_strength = outcome.strength;
         // The next denoised frame must not be filtered against one that was not.
         if (!outcome_shows_face || !settings.denoise) && state.denoiser.reset() {
             gst::debug!(
@@ -545,8 +546,9 @@ impl LsydRelight {
         let follow_counts = state.region.counts();
         drop(guard);
         if outcome_shows_face {
-            // Downstream (and the measures) can see which square was relit.
-            gst_video::VideoRegionOfInterestMeta::add(
+            // Downstream (and the measures) can see which square was relit,
+            // how strongly, and how far the change reaches beyond it.
+            let mut roi = gst_video::VideoRegionOfInterestMeta::add(
                 buffer.make_mut(),
                 "face",
                 (
@@ -555,6 +557,12 @@ impl LsydRelight {
                     crop.size as u32,
                     crop.size as u32,
                 ),
+            );
+            roi.add_param(
+                gst::Structure::builder("lsydrelight")
+                    .field("strength", f64::from(shown_strength))
+                    .field("feather", feather as u32)
+                    .build(),
             );
         }
         if warn_nan {

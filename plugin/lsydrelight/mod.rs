@@ -32,6 +32,12 @@
 //! model's crop rule gives around it is relit; with no face the frame passes. A
 //! dark face region (black frames, fades) passes too.
 //!
+//! A relit frame carries a `GstVideoRegionOfInterestMeta` of type `face` naming that
+//! square, with a parameter structure `lsydrelight` holding how much of the change shows
+//! (`strength`, a double in [0, 1]: less while a face fades in or out) and the fade's
+//! width beyond the square's inner circle (`feather`, an unsigned int, in pixels), so that
+//! downstream elements and measures know what was changed where.
+//!
 //! The source light is averaged over the last `average-frames` frames with weights
 //! `beta`^i, and the de-lit features are smoothed with `alpha` (the paper's section 3.3).
 //!

@@ -28,7 +28,9 @@
 
 use std::ops::Range;
 
-use super::{DITHER, FieldRow, FieldRows, GainField, LIFT, dither_rows, gain_row};
+use super::{
+    DITHER, FieldRow, FieldRows, GainField, LIFT, dither_rows, dither_runs, gain_row, pixel_xs,
+};
 use crate::frame::{FrameMut, YuvMatrix, round_to_u8};
 
 /// The coefficients of the affine map a set of RGB gains makes of Y, Cb and
@@ -157,6 +159,19 @@ fn spread<const SUB: usize>(out: &mut [f32], extra: &[f32], dither: &[f32]) {
     }
 }
 
+/// [`spread`] over pixels `run` of a luma row (`out`, from the row's first
+/// changed pixel; `extra` per chroma sample from the same place), each with
+/// its dither (`dither`, the run's). A run may start inside a chroma sample.
+#[inline(always)]
+fn spread_run<const SUB: usize>(out: &mut [f32], extra: &[f32], run: Range<usize>, dither: &[f32]) {
+    let (mut from, mut dither) = (run.start, dither);
+    if from % SUB != 0 {
+        out[from] = extra[from / SUB] + dither[0];
+        (from, dither) = (from + 1, &dither[1..]);
+    }
+    spread::<SUB>(&mut out[from..run.end], &extra[from / SUB..], dither);
+}
+
 impl GainField {
     /// Applies the field to a YUV frame. Per chroma row: the gains at its
     /// samples, their pixels' mean luma and their Cb and Cr, read before any
@@ -221,6 +236,10 @@ impl GainField {
         let mut gain_rows = FieldRows::new(3 * count);
         let mut luma_gain_rows = FieldRows::new(luma_x.len());
         let luma_dither = dither_rows(luma_first, luma_x.len(), 1);
+        let (xs, zeros) = (
+            pixel_xs(luma_first, luma_x.len(), 1),
+            vec![0f32; luma_x.len()],
+        );
         // Per chroma sample of the row: mean luma, Cb and Cr in, the luma
         // term, Cb and Cr out.
         let (mut sums, mut luma) = (vec![0u16; count], vec![0f32; count]);
@@ -293,14 +312,14 @@ impl GainField {
             }
             // Luma rows, each pixel with its chroma sample's term.
             for y in luma_rows(cy) {
-                let out = &mut luma_extra[pixels.clone()];
-                let (extra, dither) = (
-                    &extra[samples.clone()],
-                    &luma_dither[y % DITHER][pixels.clone()],
-                );
-                match sub {
-                    1 => spread::<1>(out, extra, dither),
-                    _ => spread::<2>(out, extra, dither),
+                // No dither where the disc holds the pixel.
+                let hole = self.undithered.span(&xs, y as f32 + 0.5);
+                let runs = dither_runs(pixels.clone(), hole, &luma_dither[y % DITHER], &zeros);
+                for (run, dither) in runs {
+                    match sub {
+                        1 => spread_run::<1>(&mut luma_extra, &extra, run, dither),
+                        _ => spread_run::<2>(&mut luma_extra, &extra, run, dither),
+                    }
                 }
                 let (ly, ty) = luma_y[y];
                 let (top, bottom) = luma_gain_rows.at(ly, |r, out| {

@@ -7,6 +7,7 @@ use std::path::Path;
 
 use deskstage::monitor::RgbImage;
 use gst::prelude::*;
+use gstlsydrelight::frame::{Crop, DetailDenoiser, FrameMut, PixelFormat, YuvMatrix};
 
 use crate::quality::Region;
 use crate::video::{FRAME, frame_time, rgb_caps, to_rgb};
@@ -111,22 +112,35 @@ pub fn through(frames: Vec<RgbImage>, format: Format) -> Result<Vec<RgbImage>, S
         .collect())
 }
 
+/// What the element says it relit in a frame: its `face` region-of-interest
+/// meta and the meta's `lsydrelight` parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Relit {
+    /// The square relit.
+    pub region: Region,
+    /// How much of the change showed, in [0, 1] (less while a face fades in
+    /// or out), and the width of its fade beyond the square's inner circle,
+    /// in pixels. None where the meta came without its parameters:
+    /// `videoconvert` copies the region but not them.
+    pub shown: Option<(f32, usize)>,
+}
+
 /// The frames relit by the element with no monitor stream by `model`, each
-/// with the square the element relit (its `face` region-of-interest meta; None
-/// when it relit none).
+/// with what the element relit in it (None when it relit nothing).
 ///
 /// `denoise` sets the element's property of that name. The measures of
 /// [`crate::quality`] read the lighting change as the output over the input,
 /// pixel by pixel, and denoising changes each pixel by the noise it removes,
 /// which they read as blotches and steps of the change (on the film clip's
-/// near-black pixels most): runs that measure the lighting change alone turn it off.
+/// near-black pixels most): to measure the lighting change alone with it on,
+/// compare the output with [`denoised`] input.
 pub fn relight(
     frames: &[RgbImage],
     model: &Path,
     target: &Path,
     format: Format,
     denoise: bool,
-) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+) -> Result<Vec<(RgbImage, Option<Relit>)>, String> {
     let element = format!(
         "lsydrelight name=r denoise={denoise} model-location=\"{}\" target-location=\"{}\"",
         model.display(),
@@ -135,9 +149,47 @@ pub fn relight(
     run(frames, &format.around(&element))
 }
 
+/// `frames` (RGB) as the element's denoising leaves them before its lighting
+/// change: filtered by the element's own code (`DetailDenoiser`) round the
+/// square, with the fade and strength the element says it relit each frame
+/// with (`relit`, from [`relight`] fed RGB). A frame it relit nothing in
+/// passes, and the filtering starts afresh after it, as the element's does.
+pub fn denoised(frames: &[RgbImage], relit: &[Option<Relit>]) -> Result<Vec<RgbImage>, String> {
+    let mut denoiser = DetailDenoiser::default();
+    frames
+        .iter()
+        .zip(relit)
+        .map(|(img, relit)| {
+            let Some(relit) = relit else {
+                denoiser.reset();
+                return Ok(img.clone());
+            };
+            let (strength, feather) = relit.shown.ok_or(
+                "the element's face region came without its lsydrelight parameters \
+                 (an element after it dropped them): feed the element RGB",
+            )?;
+            let mut data = img.data.clone();
+            let mut frame = FrameMut {
+                format: PixelFormat::Rgb,
+                width: img.width,
+                height: img.height,
+                planes: [(&mut data, 3 * img.width), (&mut [], 0), (&mut [], 0)],
+                matrix: YuvMatrix::BT601_LIMITED,
+            };
+            let Region { x, y, size } = relit.region;
+            denoiser.apply(&mut frame, Crop { x, y, size }, feather, strength);
+            Ok(RgbImage {
+                width: img.width,
+                height: img.height,
+                data,
+            })
+        })
+        .collect()
+}
+
 /// `frames` pushed through `middle` (a gst-launch fragment) one at a time,
-/// with the face region each came out with.
-fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Region>)>, String> {
+/// with what the element relit in each.
+fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Relit>)>, String> {
     let (w, h) = (frames[0].width as u32, frames[0].height as u32);
     let caps = rgb_caps(w, h, 30);
     let pipeline = gst::parse::launch(&format!(
@@ -169,17 +221,29 @@ fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Region
         src.push_buffer(buffer).map_err(|e| e.to_string())?;
         let sample = sink.pull_sample().map_err(|_| "the element stopped")?;
         let buffer = sample.buffer_owned().expect("a buffer");
-        let region = buffer
-            .meta::<gst_video::VideoRegionOfInterestMeta>()
-            .map(|roi| {
+        let relit = match buffer.meta::<gst_video::VideoRegionOfInterestMeta>() {
+            None => None,
+            Some(roi) => {
                 let (x, y, size, _) = roi.rect();
-                Region {
-                    x: x as usize,
-                    y: y as usize,
-                    size: size as usize,
-                }
-            });
-        out.push((to_rgb(&buffer, &caps), region));
+                let field = |e: gst::structure::GetError<_>| format!("the face region's {e}");
+                let shown = match roi.param("lsydrelight") {
+                    None => None,
+                    Some(p) => Some((
+                        p.get::<f64>("strength").map_err(field)? as f32,
+                        p.get::<u32>("feather").map_err(field)? as usize,
+                    )),
+                };
+                Some(Relit {
+                    region: Region {
+                        x: x as usize,
+                        y: y as usize,
+                        size: size as usize,
+                    },
+                    shown,
+                })
+            }
+        };
+        out.push((to_rgb(&buffer, &caps), relit));
     }
     let _ = src.end_of_stream();
     pipeline
