@@ -4,8 +4,6 @@
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
 //! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
-//! ```
-//!
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! ```
 //!
@@ -15,7 +13,6 @@
 //! in interleaved rounds, beside the face-region error of each interval at the
 //! recordings' own size against exact ground truth; writes `<out>/reuse.md`.
 //!
-//! ```text
 //! `--first-frame` times a live 720p pipeline from PLAYING to its first relit
 //! buffer: model load, ONNX Runtime sessions, the face detector, the first
 //! inference. The first start in a process also loads ONNX Runtime's library;
@@ -34,6 +31,10 @@
 //! frame at 720p and 1080p for p50/p99 latency. Results go to
 //! `<out>/element.json`; `python -m lsyd.evaluation.benchmark` adds the held-out accuracy,
 //! the PyTorch peer and the hardware limit, and writes the tables and plot.
+//!
+//! What the output looks like, measured without ground truth (box edges, mottling
+//! over the face, pumping) on real footage and on the recordings `steady` and
+//! `wander`, is `examples/real_footage.rs`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
