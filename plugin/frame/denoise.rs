@@ -101,7 +101,7 @@ struct Scratch {
     squared: [Vec<f32>; MOTION_SPAN],
     /// A row's local mean squared difference from the frame before.
     motion: Vec<f32>,
-    /// A row's vertical sums of samples, and of floats.
+    /// A row's vertical sums of samples, and of squared differences.
     sums: Vec<u16>,
     column: Vec<f32>,
     /// Per band of the smooth value, local mean squared differences seen.
@@ -411,12 +411,18 @@ impl ChannelState {
     fn read_row(&self, y: usize, data: &[u8], plane: &PlaneView, lane: usize, s: &mut Scratch) {
         let [x0, y0, w, _] = self.area;
         let row = &mut s.bytes[(y % SPLIT_SPAN) * w..][..w];
-        let start = (y0 + y) * plane.stride + x0 * plane.bytes + lane;
-        if plane.bytes == 1 {
-            row.copy_from_slice(&data[start..start + w]);
-        } else {
-            let bytes = data[start..].iter().step_by(plane.bytes);
-            row.iter_mut().zip(bytes).for_each(|(v, &b)| *v = b);
+        let pixels = &data[(y0 + y) * plane.stride + x0 * plane.bytes..];
+        // With the sample's size known to the compiler, the loop picks bytes
+        // out of whole vectors of pixels rather than one at a time.
+        match plane.bytes {
+            1 => row.copy_from_slice(&pixels[..w]),
+            2 => lane_of::<2>(pixels, lane, row),
+            3 => lane_of::<3>(pixels, lane, row),
+            4 => lane_of::<4>(pixels, lane, row),
+            bytes => {
+                let samples = pixels[lane..].iter().step_by(bytes);
+                row.iter_mut().zip(samples).for_each(|(v, &b)| *v = b);
+            }
         }
     }
 
@@ -426,7 +432,7 @@ impl ChannelState {
     #[inline(always)]
     fn squared_row(&self, y: usize, (w, h): (usize, usize), s: &mut Scratch) {
         let smooth = &mut s.smooth[y % SMOOTH_ROWS];
-        smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
+        smooth_row(&s.bytes, (w, h), y, &mut s.sums, smooth);
         let bytes = &s.bytes[(y % SPLIT_SPAN) * w..][..w];
         for (((squared, &b), &smooth), &past) in (s.squared[y % MOTION_SPAN].iter_mut())
             .zip(bytes)
@@ -470,13 +476,15 @@ impl ChannelState {
         // detail changes, the frame's bytes stay as they are.
         let (first, end) = disc.span(frame_y, x0, w, plane.subsample);
         let detail = &mut self.detail[row];
+        let ratio = &mut s.motion;
+        over_noise(ratio, smooth, inverse);
         for part in [0..first, end..w] {
-            for ((past, &b), (&smooth, &motion)) in (detail[part.clone()].iter_mut())
+            for ((past, &b), (&smooth, &ratio)) in (detail[part.clone()].iter_mut())
                 .zip(&bytes[part.clone()])
-                .zip(smooth[part.clone()].iter().zip(&s.motion[part]))
+                .zip(smooth[part.clone()].iter().zip(&ratio[part]))
             {
                 let d = b as f32 - smooth;
-                *past = stored(filtered(restored(*past, d), d, motion, smooth, inverse));
+                *past = stored(filtered(restored(*past, d), d, ratio));
             }
         }
         if first == end {
@@ -497,11 +505,11 @@ impl ChannelState {
         let relit = &mut s.relit[first..end];
         let dither = &s.dither[(y0 + y) % DITHER_ROWS][first..end];
         let shown = first..end;
-        for (((relit, past), (&b, &smooth)), ((&motion, &weight), &dither)) in
+        for (((relit, past), (&b, &smooth)), ((&ratio, &weight), &dither)) in
             (relit.iter_mut().zip(&mut detail[shown.clone()]))
                 .zip(bytes[shown.clone()].iter().zip(&smooth[shown.clone()]))
                 .zip(
-                    s.motion[shown.clone()]
+                    ratio[shown.clone()]
                         .iter()
                         .zip(&s.weight[shown])
                         .zip(dither),
@@ -509,20 +517,19 @@ impl ChannelState {
         {
             let v = b as f32;
             let d = v - smooth;
-            let filtered = filtered(restored(*past, d), d, motion, smooth, inverse);
+            let filtered = filtered(restored(*past, d), d, ratio);
             *past = stored(filtered);
             *relit = v + weight * (filtered - d) + dither;
         }
-        let start = (y0 + y) * plane.stride + (x0 + first) * plane.bytes + lane;
-        if plane.bytes == 1 {
-            let bytes = &mut data[start..start + relit.len()];
-            for (b, &r) in bytes.iter_mut().zip(&*relit) {
-                *b = round_to_u8(r);
-            }
-        } else {
-            let bytes = data[start..].iter_mut().step_by(plane.bytes);
-            for (b, &r) in bytes.zip(&*relit) {
-                *b = round_to_u8(r);
+        let pixels = &mut data[(y0 + y) * plane.stride + (x0 + first) * plane.bytes..];
+        match plane.bytes {
+            1 => set_lane::<1>(pixels, 0, relit),
+            2 => set_lane::<2>(pixels, lane, relit),
+            3 => set_lane::<3>(pixels, lane, relit),
+            4 => set_lane::<4>(pixels, lane, relit),
+            bytes => {
+                let samples = pixels[lane..].iter_mut().step_by(bytes);
+                samples.zip(&*relit).for_each(|(b, &r)| *b = round_to_u8(r));
             }
         }
     }
@@ -596,34 +603,45 @@ impl ChannelState {
     }
 }
 
-/// The smooth values of row `y` of a `w` × `h` map, whose rows round it
-/// `ring` holds by row modulo [`SPLIT_SPAN`]: their box blur of
-/// [`SPLIT_RADIUS`], shrinking at the borders, into `out`; `sums` and
-/// `column` hold the vertical pass.
+/// Byte `lane` of each of the first `out.len()` samples of `BYTES` bytes
+/// of `pixels`, into `out`.
 #[inline(always)]
-fn smooth_row(
-    ring: &[u8],
-    (w, h): (usize, usize),
-    y: usize,
-    sums: &mut [u16],
-    column: &mut [f32],
-    out: &mut [f32],
-) {
+fn lane_of<const BYTES: usize>(pixels: &[u8], lane: usize, out: &mut [u8]) {
+    for (v, pixel) in out.iter_mut().zip(pixels.chunks_exact(BYTES)) {
+        *v = pixel[lane];
+    }
+}
+
+/// Byte `lane` of each of the first `values.len()` samples of `BYTES` bytes
+/// of `pixels`: the value rounded.
+#[inline(always)]
+fn set_lane<const BYTES: usize>(pixels: &mut [u8], lane: usize, values: &[f32]) {
+    for (pixel, &r) in pixels.chunks_exact_mut(BYTES).zip(values) {
+        pixel[lane] = round_to_u8(r);
+    }
+}
+
+/// The smooth values of row `y` of a `w` × `h` map, whose rows round it
+/// `ring` holds by row modulo [`SPLIT_SPAN`]: the mean of the samples within
+/// [`SPLIT_RADIUS`] each way, the window shrinking at the borders, into
+/// `out`; `sums` holds the vertical sums. The sums are of whole numbers,
+/// exact in any order, and scaled once.
+#[inline(always)]
+fn smooth_row(ring: &[u8], (w, h): (usize, usize), y: usize, sums: &mut [u16], out: &mut [f32]) {
     let (lo, hi) = (
         y.saturating_sub(SPLIT_RADIUS),
         (y + SPLIT_RADIUS + 1).min(h),
     );
-    let scale = 1.0 / (hi - lo) as f32;
+    let rows = hi - lo;
     let row = |r: usize| &ring[(r % SPLIT_SPAN) * w..][..w];
-    // Whole numbers: their sum is exact in any order, as a float or not.
-    if hi - lo == SPLIT_SPAN {
+    if rows == SPLIT_SPAN {
         let rows: [&[u8]; SPLIT_SPAN] = std::array::from_fn(row);
-        for (x, c) in column.iter_mut().enumerate() {
+        for (x, s) in sums.iter_mut().enumerate() {
             let mut sum = rows[0][x] as u16;
             for row in &rows[1..] {
                 sum += row[x] as u16;
             }
-            *c = sum as f32 * scale;
+            *s = sum;
         }
     } else {
         sums.iter_mut()
@@ -634,9 +652,28 @@ fn smooth_row(
                 .zip(row(r))
                 .for_each(|(s, &b)| *s += b as u16);
         }
-        (column.iter_mut().zip(&*sums)).for_each(|(c, &s)| *c = s as f32 * scale);
     }
-    box_row::<SPLIT_SPAN>(column, out);
+    let mean = |sum: u16, columns: usize| sum as f32 * (1.0 / (rows * columns) as f32);
+    if w >= SPLIT_SPAN {
+        // Samples with the whole window: out[k] sums sums[k - radius..=k + radius].
+        let m = w + 1 - SPLIT_SPAN;
+        let shifted: [&[u16]; SPLIT_SPAN] = std::array::from_fn(|s| &sums[s..s + m]);
+        for (k, o) in out[SPLIT_RADIUS..SPLIT_RADIUS + m].iter_mut().enumerate() {
+            let mut sum = shifted[0][k];
+            for run in &shifted[1..] {
+                sum += run[k];
+            }
+            *o = mean(sum, SPLIT_SPAN);
+        }
+    }
+    // The ends' shrunken windows (every sample, in a row narrower than one).
+    for k in (0..SPLIT_RADIUS.min(w)).chain(SPLIT_RADIUS.max(w.saturating_sub(SPLIT_RADIUS))..w) {
+        let (first, end) = (
+            k.saturating_sub(SPLIT_RADIUS),
+            (k + SPLIT_RADIUS + 1).min(w),
+        );
+        out[k] = mean(sums[first..end].iter().sum(), end - first);
+    }
 }
 
 /// A row's horizontal box blur of `SPAN` samples, shrinking at the ends:
@@ -736,13 +773,12 @@ fn per_band(noise: &[Option<f32>; BANDS]) -> Option<[f32; BANDS]> {
     }))
 }
 
-/// The filtered detail of a sample of detail `d` and smooth value `smooth`,
-/// whose filtered detail was `past` (`restored`), at a local mean squared
-/// difference `motion`; `inverse` is 1 over the noise per band.
+/// The filtered detail of a sample of detail `d` whose filtered detail was
+/// `past` (`restored`), at a local mean squared difference `ratio` times the
+/// noise's level.
 #[inline(always)]
-fn filtered(past: f32, d: f32, motion: f32, smooth: f32, inverse: &[f32; BANDS]) -> f32 {
-    let share = new_share(motion * band_value(smooth, inverse));
-    past + share * (d - past)
+fn filtered(past: f32, d: f32, ratio: f32) -> f32 {
+    past + new_share(ratio) * (d - past)
 }
 
 /// The band of [`LEVELS`] a smooth value lies in.
@@ -750,18 +786,52 @@ fn band(smooth: f32) -> usize {
     (smooth.max(0.0) as usize / LEVELS).min(BANDS - 1)
 }
 
-/// `per_band[band(smooth)]`, by comparisons rather than an index, so that a
-/// loop over samples vectorises: `band` is the count of band starts
-/// (whole numbers) that the smooth value reaches.
+/// Each of a row's local mean squared differences `motion` over the noise's
+/// level at its smooth value, `inverse` being 1 over the noise per band.
 #[inline(always)]
-fn band_value(smooth: f32, per_band: &[f32; BANDS]) -> f32 {
-    let mut value = per_band[0];
-    for (b, &v) in per_band.iter().enumerate().skip(1) {
-        if smooth >= (b * LEVELS) as f32 {
-            value = v;
+fn over_noise(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { over_noise_avx2(motion, smooth, inverse) };
+    }
+    for (m, &s) in motion.iter_mut().zip(smooth) {
+        *m *= inverse[band(s)];
+    }
+}
+
+/// `over_noise` with AVX2: the band's value is picked by a permutation of a
+/// vector that holds one band a lane, where the compiler, from an index,
+/// picks one sample at a time. The same band and product: the smooth value
+/// times 1/[`LEVELS`] (a power of two, so exact) truncated is `band`'s.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn over_noise_avx2(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
+    use std::arch::x86_64::*;
+    const LANES: usize = 8;
+    const { assert!(BANDS == LANES && LEVELS.is_power_of_two()) };
+    let n = motion.len().min(smooth.len());
+    let (motion, smooth) = (&mut motion[..n], &smooth[..n]);
+    let last_band = _mm256_set1_epi32(BANDS as i32 - 1);
+    let per_level = _mm256_set1_ps(1.0 / LEVELS as f32);
+    // SAFETY: each load and store reads or writes 8 floats of a slice of 8
+    // (`inverse`, or a chunk of 8).
+    unsafe {
+        let table = _mm256_loadu_ps(inverse.as_ptr());
+        for (m, s) in (motion.chunks_exact_mut(LANES)).zip(smooth.chunks_exact(LANES)) {
+            let s = _mm256_max_ps(_mm256_loadu_ps(s.as_ptr()), _mm256_setzero_ps());
+            let b = _mm256_min_epi32(_mm256_cvttps_epi32(_mm256_mul_ps(s, per_level)), last_band);
+            let over = _mm256_mul_ps(
+                _mm256_loadu_ps(m.as_ptr()),
+                _mm256_permutevar8x32_ps(table, b),
+            );
+            _mm256_storeu_ps(m.as_mut_ptr(), over);
         }
     }
-    value
+    let done = n - n % LANES;
+    for (m, &s) in motion[done..].iter_mut().zip(&smooth[done..]) {
+        *m *= inverse[band(s)];
+    }
 }
 
 /// Share of the new frame's detail at a local mean squared difference of

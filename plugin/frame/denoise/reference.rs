@@ -115,7 +115,7 @@ impl ReferenceChannel {
             let bytes = data[start..].iter().step_by(plane.bytes);
             row.iter_mut().zip(bytes).for_each(|(v, &b)| *v = b as f32);
         }
-        box_blur(&s.values, (w, h), SPLIT_RADIUS, &mut s.smooth, &mut s.rows);
+        window_mean(&s.values, (w, h), SPLIT_RADIUS, &mut s.smooth);
         // The detail, and its difference from the filtered detail of the
         // frame before: NaN where there is none.
         s.past.clear();
@@ -230,6 +230,23 @@ fn learn_noise(noise: &mut [Option<f32>; BANDS], scratch: &mut Scratch) {
         }
     }
     super::learn_noise(noise, seen)
+}
+
+/// The mean of the whole numbers of a `w` × `h` map within `radius` each
+/// way, the window shrinking at the borders, into `out`: their sum, exact,
+/// times 1 over their count.
+fn window_mean(field: &[f32], (w, h): (usize, usize), radius: usize, out: &mut Vec<f32>) {
+    out.clear();
+    for y in 0..h {
+        let rows = y.saturating_sub(radius)..(y + radius + 1).min(h);
+        for x in 0..w {
+            let columns = x.saturating_sub(radius)..(x + radius + 1).min(w);
+            let sum: f32 = (rows.clone())
+                .flat_map(|r| &field[r * w + columns.start..r * w + columns.end])
+                .sum();
+            out.push(sum * (1.0 / (rows.len() * columns.len()) as f32));
+        }
+    }
 }
 
 /// A box blur of a `w` × `h` map into `out`, `radius` each way, shrinking at
