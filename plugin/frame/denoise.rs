@@ -122,6 +122,17 @@ const MOTION_SPAN: usize = 2 * MOTION_RADIUS + 1;
 /// for the squared differences of the [`MOTION_RADIUS`] rows below it.
 const SMOOTH_ROWS: usize = MOTION_RADIUS + 1;
 
+/// What a walk over a channel's area does with each row once its motion is
+/// known.
+enum Walk<'a> {
+    /// Nothing: the walk only teaches the noise's level.
+    Learn,
+    /// Keeps the row's detail as it is, with no noise level to filter against.
+    Keep,
+    /// Filters the row against the noise's level, 1 over it per band.
+    Filter(&'a [f32; BANDS]),
+}
+
 /// Rows of the ordered dither's pattern (`gain_field::dither`).
 const DITHER_ROWS: usize = 4;
 
@@ -368,7 +379,14 @@ impl ChannelState {
         s.motion.resize(w, 0.0);
         s.sums.resize(w, 0);
         s.column.resize(w, 0.0);
-        s.seen.iter_mut().for_each(Vec::clear);
+        // Every third sample, or fewer in a large area: a quantile of about
+        // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
+        let step = (w * h / NOISE_SAMPLES).max(3);
+        if per_band(&self.noise).is_none() {
+            // No level learnt yet, in a stream's first frames: this frame
+            // teaches it first, so that the first with a past is filtered.
+            self.walk(&Walk::Learn, data, plane, lane, disc, step, s);
+        }
         // Over the noise, per band: what a local mean squared difference is
         // compared with. Without it the frame passes and only teaches it.
         let inverse = per_band(&self.noise).map(|noise| noise.map(|n| 1.0 / n));
@@ -383,9 +401,30 @@ impl ChannelState {
             s.relit.resize(w, 0.0);
             s.weight.resize(w, 0.0);
         }
-        // Every third sample, or fewer in a large area: a quantile of about
-        // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
-        let step = (w * h / NOISE_SAMPLES).max(3);
+        let walk = match &inverse {
+            Some(inverse) => Walk::Filter(inverse),
+            None => Walk::Keep,
+        };
+        self.walk(&walk, data, plane, lane, disc, step, s);
+    }
+
+    /// Walks the area once, a row at a time, doing `walk` with each row once
+    /// its motion is known, and learns the noise's level from its motion,
+    /// sampled every `step`th sample.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn walk(
+        &mut self,
+        walk: &Walk,
+        data: &mut [u8],
+        plane: &PlaneView,
+        lane: usize,
+        disc: &Disc,
+        step: usize,
+        s: &mut Scratch,
+    ) {
+        let [_, _, w, h] = self.area;
+        s.seen.iter_mut().for_each(Vec::clear);
         for y in 0..SPLIT_RADIUS.min(h) {
             self.read_row(y, data, plane, lane, s);
         }
@@ -399,7 +438,7 @@ impl ChannelState {
             if k >= MOTION_RADIUS {
                 let y = k - MOTION_RADIUS;
                 self.motion_row(y, (w, h), step, s);
-                self.filter_row(y, data, plane, lane, disc, inverse.as_ref(), s);
+                self.filter_row(y, walk, data, plane, lane, disc, s);
             }
         }
         learn_noise(&mut self.noise, &mut s.seen);
@@ -445,31 +484,34 @@ impl ChannelState {
         }
     }
 
-    /// Filters row `y` of the area against the noise's level (1 over it per
-    /// band, `inverse`) with the motion in `s.motion`, and writes what `disc`
-    /// shows of it into byte `lane` of `data`; without a noise level, keeps
-    /// the row's detail as it is.
+    /// Does `walk` with row `y` of the area: filtering, with the motion in
+    /// `s.motion`, writes what `disc` shows of the row into byte `lane` of
+    /// `data`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn filter_row(
         &mut self,
         y: usize,
+        walk: &Walk,
         data: &mut [u8],
         plane: &PlaneView,
         lane: usize,
         disc: &Disc,
-        inverse: Option<&[f32; BANDS]>,
         s: &mut Scratch,
     ) {
         let [x0, y0, w, _] = self.area;
         let row = y * w..(y + 1) * w;
         let bytes = &s.bytes[(y % SPLIT_SPAN) * w..][..w];
         let smooth = &s.smooth[y % SMOOTH_ROWS];
-        let Some(inverse) = inverse else {
-            for ((past, &b), &smooth) in self.detail[row].iter_mut().zip(bytes).zip(smooth) {
-                *past = stored(b as f32 - smooth);
+        let inverse = match walk {
+            Walk::Learn => return,
+            Walk::Keep => {
+                for ((past, &b), &smooth) in self.detail[row].iter_mut().zip(bytes).zip(smooth) {
+                    *past = stored(b as f32 - smooth);
+                }
+                return;
             }
-            return;
+            Walk::Filter(inverse) => *inverse,
         };
         let frame_y = ((y0 + y) as f32 + 0.5) * plane.subsample as f32;
         // The samples the denoising shows at; elsewhere only the filtered

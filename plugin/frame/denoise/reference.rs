@@ -146,8 +146,11 @@ impl ReferenceChannel {
             &mut s.motion,
             &mut s.rows,
         );
-        // The noise's level the frames before taught; this one's motion
-        // teaches the next.
+        // The noise's level the frames before taught, or where none did yet,
+        // this one; this one's motion teaches the next.
+        if per_band(&self.noise).is_none() {
+            learn_noise(&mut self.noise, s);
+        }
         let known = per_band(&self.noise);
         learn_noise(&mut self.noise, s);
         let Some(noise) = known else {
