@@ -353,13 +353,13 @@ impl ChannelState {
 
     // Always inlined, so that `filter_avx2` holds a copy built for AVX2.
     //
-    // The steps, per sample, in the operations (and their order) of a box
-    // blur of whole maps (the reference in the tests): the smooth value, a 5
-    // × 5 mean of the samples; the detail, the sample less it; its
-    // difference from the filtered detail of the frame before, squared (0
-    // where there is none); their 3 × 3 mean, the motion; then, with the
-    // noise's level learnt from the frames before, the share of the new
-    // detail taken. A row is filtered and written once the squared
+    // The steps, per sample, in the operations (and their order) of the
+    // plain denoiser in the tests, which works on whole maps: the smooth
+    // value, the mean of the 5 × 5 samples round it; the detail, the sample
+    // less it; its difference from the filtered detail of the frame before,
+    // squared (0 where there is none); their 3 × 3 mean, the motion; then,
+    // with the noise's level learnt from the frames before, the share of the
+    // new detail taken. A row is filtered and written once the squared
     // differences of the row below it are known; the motion of the whole
     // area then updates the noise's level for the next frame.
     #[inline(always)]
