@@ -15,9 +15,11 @@
 //! detail is taken; where it differs by much more (the face moved, or turned),
 //! the new detail is taken whole, so a moving face does not leave a trail.
 //! The noise's level is learnt from the frames themselves, per band of
-//! brightness. The result shows over the disc round the face that the
-//! lighting change covers, fading out where the change does, so the noise
-//! does not change level at an edge.
+//! brightness, each frame filtered against what the frames before it taught:
+//! a camera's noise changes over seconds, and so each frame is walked once.
+//! The result shows over the disc round the face that the lighting change
+//! covers, fading out where the change does, so the noise does not change
+//! level at an edge.
 
 use super::gain_field::{INNER_RADIUS, dither};
 use super::{Crop, FrameMut, PixelFormat, round_to_u8};
@@ -68,11 +70,12 @@ const BANDS: usize = 256 / LEVELS;
 struct ChannelState {
     /// The part of the plane held: x, y, width, height in plane samples.
     area: [usize; 4],
-    /// Filtered detail per sample of `area`, NaN where there is none yet.
-    detail: Vec<f32>,
+    /// Filtered detail per sample of `area` ([`stored`]), [`NO_DETAIL`]
+    /// where there is none yet.
+    detail: Vec<i16>,
     /// The buffer `detail` moves into when the area moves, kept to spare its
     /// allocation (a fresh one costs a page fault every 4 KiB).
-    moved: Vec<f32>,
+    moved: Vec<i16>,
     /// Variance of the difference of detail between frames where nothing
     /// moves, per band of [`LEVELS`] of the smooth value: a camera's shot
     /// noise grows with the light, so dark hair and a dark room are quieter
@@ -81,31 +84,53 @@ struct ChannelState {
 }
 
 /// Buffers kept from channel to channel and frame to frame to spare their
-/// allocation. The frame is walked a row at a time, twice, so that what a row
-/// needs stays in the cache: whole maps of floats, written in one pass and
-/// read in the next, made the denoising as slow as the memory.
+/// allocation. The area is walked once, a row at a time, and each step keeps
+/// only the few rows round it that the next needs, so that what a row needs
+/// stays in the cache: whole maps of floats, written by one step and read by
+/// the next, made the denoising as slow as the memory.
 #[derive(Default)]
 struct Scratch {
-    /// The channel's samples over the area, row by row.
+    /// The channel's samples of the last [`SPLIT_SPAN`] rows read, by row
+    /// modulo [`SPLIT_SPAN`]: the smooth value needs them after the frame's
+    /// row is written.
     bytes: Vec<u8>,
-    /// Local mean squared difference from the frame before, per sample of
-    /// the area: the first pass's result, which the second needs with the
-    /// noise's level learnt from the whole frame.
+    /// The last rows' smooth values, by row modulo [`SMOOTH_ROWS`].
+    smooth: [Vec<f32>; SMOOTH_ROWS],
+    /// The last rows' squared differences from the frame before, by row
+    /// modulo [`MOTION_SPAN`].
+    squared: [Vec<f32>; MOTION_SPAN],
+    /// A row's local mean squared difference from the frame before.
     motion: Vec<f32>,
-    /// Smooth value per sample of the area, found in the first pass.
-    smooth: Vec<f32>,
-    /// The last rows' squared differences, by row modulo 3.
-    squared: [Vec<f32>; 3],
-    /// A row's vertical sums of samples, and of floats.
+    /// A row's vertical sums of samples, and of squared differences.
     sums: Vec<u16>,
     column: Vec<f32>,
     /// Per band of the smooth value, local mean squared differences seen.
     seen: [Vec<f32>; BANDS],
-    /// A row's frame x coordinates, results, and the dither of each
-    /// row of its pattern.
+    /// A row's frame x coordinates, how much of the denoising shows at
+    /// each, its results, and the dither of each row of its pattern.
     xs: Vec<f32>,
+    weight: Vec<f32>,
     relit: Vec<f32>,
     dither: [Vec<f32>; DITHER_ROWS],
+}
+
+/// Rows of the box blur that splits off the smooth band, and of the local
+/// mean of the motion.
+const SPLIT_SPAN: usize = 2 * SPLIT_RADIUS + 1;
+const MOTION_SPAN: usize = 2 * MOTION_RADIUS + 1;
+/// Rows of smooth values kept: a row's motion, and so its filtering, waits
+/// for the squared differences of the [`MOTION_RADIUS`] rows below it.
+const SMOOTH_ROWS: usize = MOTION_RADIUS + 1;
+
+/// What a walk over a channel's area does with each row once its motion is
+/// known.
+enum Walk<'a> {
+    /// Nothing: the walk only teaches the noise's level.
+    Learn,
+    /// Keeps the row's detail as it is, with no noise level to filter against.
+    Keep,
+    /// Filters the row against the noise's level, 1 over it per band.
+    Filter(&'a [f32; BANDS]),
 }
 
 /// Rows of the ordered dither's pattern (`gain_field::dither`).
@@ -220,6 +245,22 @@ impl Disc {
         (first.min(end), end)
     }
 
+    /// Of the same samples, the first and the end of a run the denoising
+    /// shows at whole strength: within the inner circle, where `weight` is
+    /// exactly `strength`. Found with a margin of 2 samples inwards.
+    fn whole_span(&self, y: f32, x0: usize, w: usize, sub: usize) -> (usize, usize) {
+        let radius = self.inner - 2.0 * sub as f32;
+        let dy = y - self.centre[1];
+        if dy.abs() >= radius {
+            return (0, 0);
+        }
+        let half = (radius * radius - dy * dy).sqrt();
+        let column = |frame_x: f32| frame_x / sub as f32 - 0.5 - x0 as f32;
+        let first = (column(self.centre[0] - half).ceil().max(0.0) as usize).min(w);
+        let end = ((column(self.centre[0] + half).floor() + 1.0).max(0.0) as usize).min(w);
+        (first.min(end), end)
+    }
+
     /// The plane's samples the disc reaches, subsampled by `sub`, within a
     /// plane of `size`: x, y, width, height.
     fn area(&self, sub: usize, size: (usize, usize)) -> [usize; 4] {
@@ -312,14 +353,15 @@ impl ChannelState {
 
     // Always inlined, so that `filter_avx2` holds a copy built for AVX2.
     //
-    // The steps, per sample, in the operations (and their order) of a box
-    // blur of whole maps (the reference in the tests): the smooth value, a 5
-    // × 5 mean of the samples; the detail, the sample less it; its
-    // difference from the filtered detail of the frame before, squared (0
-    // where there is none); their 3 × 3 mean, the motion; then, with the
-    // noise's level that the motion of the whole frame gives, the share of
-    // the new detail taken. The first pass finds the motion, the second
-    // filters and writes.
+    // The steps, per sample, in the operations (and their order) of the
+    // plain denoiser in the tests, which works on whole maps: the smooth
+    // value, the mean of the 5 × 5 samples round it; the detail, the sample
+    // less it; its difference from the filtered detail of the frame before,
+    // squared (0 where there is none); their 3 × 3 mean, the motion; then,
+    // with the noise's level learnt from the frames before, the share of the
+    // new detail taken. A row is filtered and written once the squared
+    // differences of the row below it are known; the motion of the whole
+    // area then updates the noise's level for the next frame.
     #[inline(always)]
     fn filter_portable(
         &mut self,
@@ -329,112 +371,207 @@ impl ChannelState {
         disc: &Disc,
         s: &mut Scratch,
     ) {
-        let [x0, y0, w, h] = self.area;
-        let n = w * h;
-        s.bytes.resize(n, 0);
-        for (y, row) in s.bytes.chunks_exact_mut(w).enumerate() {
-            let start = (y0 + y) * plane.stride + x0 * plane.bytes + lane;
-            if plane.bytes == 1 {
-                row.copy_from_slice(&data[start..start + w]);
-            } else {
-                let bytes = data[start..].iter().step_by(plane.bytes);
-                row.iter_mut().zip(bytes).for_each(|(v, &b)| *v = b);
-            }
-        }
-        s.motion.resize(n, 0.0);
-        s.smooth.resize(n, 0.0);
-        for buffer in &mut s.squared {
+        let [x0, _, w, h] = self.area;
+        s.bytes.resize(SPLIT_SPAN * w, 0);
+        for buffer in s.smooth.iter_mut().chain(&mut s.squared) {
             buffer.resize(w, 0.0);
         }
+        s.motion.resize(w, 0.0);
         s.sums.resize(w, 0);
         s.column.resize(w, 0.0);
-        s.seen.iter_mut().for_each(Vec::clear);
         // Every third sample, or fewer in a large area: a quantile of about
         // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
-        let step = (n / NOISE_SAMPLES).max(3);
-        for y in 0..h {
-            let row = y * w..(y + 1) * w;
-            let smooth = &mut s.smooth[row.clone()];
-            smooth_row(&s.bytes, (w, h), y, &mut s.sums, &mut s.column, smooth);
-            for (((squared, &b), &smooth), &past) in (s.squared[y % 3].iter_mut())
-                .zip(&s.bytes[row.clone()])
-                .zip(&*smooth)
-                .zip(&self.detail[row])
-            {
-                let difference = (b as f32 - smooth) - past;
-                *squared = if difference.is_nan() {
-                    0.0
-                } else {
-                    difference * difference
-                };
-            }
-            if y >= MOTION_RADIUS {
-                self.motion_row(y - MOTION_RADIUS, (w, h), step, s);
-            }
+        let step = (w * h / NOISE_SAMPLES).max(3);
+        if per_band(&self.noise).is_none() {
+            // No level learnt yet, in a stream's first frames: this frame
+            // teaches it first, so that the first with a past is filtered.
+            self.walk(&Walk::Learn, data, plane, lane, disc, step, s);
         }
-        for y in h.saturating_sub(MOTION_RADIUS)..h {
-            self.motion_row(y, (w, h), step, s);
-        }
-        let Some(noise) = update_noise(&mut self.noise, &mut s.seen) else {
-            // Nothing to filter against: the detail is kept, the frame passes.
-            for ((past, &b), &smooth) in (self.detail.iter_mut()).zip(&s.bytes).zip(&s.smooth) {
-                *past = b as f32 - smooth;
-            }
-            return;
-        };
         // Over the noise, per band: what a local mean squared difference is
-        // compared with.
-        let inverse = noise.map(|n| 1.0 / n);
-        let sub = plane.subsample as f32;
-        s.xs.clear();
-        s.xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub));
-        for (r, row) in s.dither.iter_mut().enumerate() {
-            row.clear();
-            row.extend((0..w).map(|x| dither(x0 + x, r)));
+        // compared with. Without it the frame passes and only teaches it.
+        let inverse = per_band(&self.noise).map(|noise| noise.map(|n| 1.0 / n));
+        if inverse.is_some() {
+            let sub = plane.subsample as f32;
+            s.xs.clear();
+            s.xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub));
+            for (r, row) in s.dither.iter_mut().enumerate() {
+                row.clear();
+                row.extend((0..w).map(|x| dither(x0 + x, r)));
+            }
+            s.relit.resize(w, 0.0);
+            s.weight.resize(w, 0.0);
         }
-        s.relit.resize(w, 0.0);
-        for y in 0..h {
-            let frame_y = ((y0 + y) as f32 + 0.5) * sub;
-            // The samples the denoising shows at; elsewhere only the filtered
-            // detail changes, the frame's bytes stay as they are.
-            let (first, end) = disc.span(frame_y, x0, w, plane.subsample);
-            let at = |range: std::ops::Range<usize>| (y * w + range.start)..(y * w + range.end);
-            for part in [at(0..first), at(end..w)] {
-                for ((past, &b), (&smooth, &motion)) in (self.detail[part.clone()].iter_mut())
-                    .zip(&s.bytes[part.clone()])
-                    .zip(s.smooth[part.clone()].iter().zip(&s.motion[part]))
-                {
-                    *past = filtered(*past, b as f32 - smooth, motion, smooth, &inverse);
+        let walk = match &inverse {
+            Some(inverse) => Walk::Filter(inverse),
+            None => Walk::Keep,
+        };
+        self.walk(&walk, data, plane, lane, disc, step, s);
+    }
+
+    /// Walks the area once, a row at a time, doing `walk` with each row once
+    /// its motion is known, and learns the noise's level from its motion,
+    /// sampled every `step`th sample.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn walk(
+        &mut self,
+        walk: &Walk,
+        data: &mut [u8],
+        plane: &PlaneView,
+        lane: usize,
+        disc: &Disc,
+        step: usize,
+        s: &mut Scratch,
+    ) {
+        let [_, _, w, h] = self.area;
+        s.seen.iter_mut().for_each(Vec::clear);
+        for y in 0..SPLIT_RADIUS.min(h) {
+            self.read_row(y, data, plane, lane, s);
+        }
+        for k in 0..h + MOTION_RADIUS {
+            if k < h {
+                if k + SPLIT_RADIUS < h {
+                    self.read_row(k + SPLIT_RADIUS, data, plane, lane, s);
                 }
+                self.squared_row(k, (w, h), s);
             }
-            if first == end {
-                continue;
+            if k >= MOTION_RADIUS {
+                let y = k - MOTION_RADIUS;
+                self.motion_row(y, (w, h), step, s);
+                self.filter_row(y, walk, data, plane, lane, disc, s);
             }
-            let relit = &mut s.relit[first..end];
-            let disc_row = disc.row(frame_y);
-            let shown = at(first..end);
-            let dither = &s.dither[(y0 + y) % DITHER_ROWS][first..end];
-            for (((relit, past), (&b, &smooth)), ((&motion, &x), &dither)) in
-                (relit.iter_mut().zip(&mut self.detail[shown.clone()]))
-                    .zip(s.bytes[shown.clone()].iter().zip(&s.smooth[shown.clone()]))
-                    .zip(s.motion[shown].iter().zip(&s.xs[first..end]).zip(dither))
+        }
+        learn_noise(&mut self.noise, &mut s.seen);
+    }
+
+    /// Copies byte `lane` of the samples of row `y` of the area into the ring
+    /// of rows `s.bytes`.
+    #[inline(always)]
+    fn read_row(&self, y: usize, data: &[u8], plane: &PlaneView, lane: usize, s: &mut Scratch) {
+        let [x0, y0, w, _] = self.area;
+        let row = &mut s.bytes[(y % SPLIT_SPAN) * w..][..w];
+        let pixels = &data[(y0 + y) * plane.stride + x0 * plane.bytes..];
+        // With the sample's size known to the compiler, the loop picks bytes
+        // out of whole vectors of pixels rather than one at a time.
+        match plane.bytes {
+            1 => row.copy_from_slice(&pixels[..w]),
+            2 => lane_of::<2>(pixels, lane, row),
+            3 => lane_of::<3>(pixels, lane, row),
+            4 => lane_of::<4>(pixels, lane, row),
+            bytes => {
+                let samples = pixels[lane..].iter().step_by(bytes);
+                row.iter_mut().zip(samples).for_each(|(v, &b)| *v = b);
+            }
+        }
+    }
+
+    /// The smooth values of row `y` of the area, and its squared differences
+    /// from the filtered detail of the frame before (0 where there is none),
+    /// into their rings in `s`.
+    #[inline(always)]
+    fn squared_row(&self, y: usize, (w, h): (usize, usize), s: &mut Scratch) {
+        let smooth = &mut s.smooth[y % SMOOTH_ROWS];
+        smooth_row(&s.bytes, (w, h), y, &mut s.sums, smooth);
+        let bytes = &s.bytes[(y % SPLIT_SPAN) * w..][..w];
+        for (((squared, &b), &smooth), &past) in (s.squared[y % MOTION_SPAN].iter_mut())
+            .zip(bytes)
+            .zip(&*smooth)
+            .zip(&self.detail[y * w..(y + 1) * w])
+        {
+            let d = b as f32 - smooth;
+            let difference = d - restored(past, d);
+            *squared = difference * difference;
+        }
+    }
+
+    /// Does `walk` with row `y` of the area: filtering, with the motion in
+    /// `s.motion`, writes what `disc` shows of the row into byte `lane` of
+    /// `data`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
+    fn filter_row(
+        &mut self,
+        y: usize,
+        walk: &Walk,
+        data: &mut [u8],
+        plane: &PlaneView,
+        lane: usize,
+        disc: &Disc,
+        s: &mut Scratch,
+    ) {
+        let [x0, y0, w, _] = self.area;
+        let row = y * w..(y + 1) * w;
+        let bytes = &s.bytes[(y % SPLIT_SPAN) * w..][..w];
+        let smooth = &s.smooth[y % SMOOTH_ROWS];
+        let inverse = match walk {
+            Walk::Learn => return,
+            Walk::Keep => {
+                for ((past, &b), &smooth) in self.detail[row].iter_mut().zip(bytes).zip(smooth) {
+                    *past = stored(b as f32 - smooth);
+                }
+                return;
+            }
+            Walk::Filter(inverse) => *inverse,
+        };
+        let frame_y = ((y0 + y) as f32 + 0.5) * plane.subsample as f32;
+        // The samples the denoising shows at; elsewhere only the filtered
+        // detail changes, the frame's bytes stay as they are.
+        let (first, end) = disc.span(frame_y, x0, w, plane.subsample);
+        let detail = &mut self.detail[row];
+        let ratio = &mut s.motion;
+        over_noise(ratio, smooth, inverse);
+        for part in [0..first, end..w] {
+            for ((past, &b), (&smooth, &ratio)) in (detail[part.clone()].iter_mut())
+                .zip(&bytes[part.clone()])
+                .zip(smooth[part.clone()].iter().zip(&ratio[part]))
             {
-                let v = b as f32;
-                let d = v - smooth;
-                *past = filtered(*past, d, motion, smooth, &inverse);
-                *relit = v + disc_row.weight(x) * (*past - d) + dither;
+                let d = b as f32 - smooth;
+                *past = stored(filtered(restored(*past, d), d, ratio));
             }
-            let start = (y0 + y) * plane.stride + (x0 + first) * plane.bytes + lane;
-            if plane.bytes == 1 {
-                let bytes = &mut data[start..start + relit.len()];
-                for (b, &r) in bytes.iter_mut().zip(&*relit) {
-                    *b = round_to_u8(r);
-                }
-            } else {
-                let bytes = data[start..].iter_mut().step_by(plane.bytes);
-                for (b, &r) in bytes.zip(&*relit) {
-                    *b = round_to_u8(r);
-                }
+        }
+        if first == end {
+            return;
+        }
+        // How much shows at each sample: the fade's weight, found only
+        // outside the run of whole strength round the middle.
+        let (whole_first, whole_end) = disc.whole_span(frame_y, x0, w, plane.subsample);
+        let whole_first = whole_first.clamp(first, end);
+        let whole_end = whole_end.clamp(whole_first, end);
+        let disc_row = disc.row(frame_y);
+        for part in [first..whole_first, whole_end..end] {
+            for (weight, &x) in s.weight[part.clone()].iter_mut().zip(&s.xs[part]) {
+                *weight = disc_row.weight(x);
+            }
+        }
+        s.weight[whole_first..whole_end].fill(disc.strength);
+        let relit = &mut s.relit[first..end];
+        let dither = &s.dither[(y0 + y) % DITHER_ROWS][first..end];
+        let shown = first..end;
+        for (((relit, past), (&b, &smooth)), ((&ratio, &weight), &dither)) in
+            (relit.iter_mut().zip(&mut detail[shown.clone()]))
+                .zip(bytes[shown.clone()].iter().zip(&smooth[shown.clone()]))
+                .zip(
+                    ratio[shown.clone()]
+                        .iter()
+                        .zip(&s.weight[shown])
+                        .zip(dither),
+                )
+        {
+            let v = b as f32;
+            let d = v - smooth;
+            let filtered = filtered(restored(*past, d), d, ratio);
+            *past = stored(filtered);
+            *relit = v + weight * (filtered - d) + dither;
+        }
+        let pixels = &mut data[(y0 + y) * plane.stride + (x0 + first) * plane.bytes..];
+        match plane.bytes {
+            1 => set_lane::<1>(pixels, 0, relit),
+            2 => set_lane::<2>(pixels, lane, relit),
+            3 => set_lane::<3>(pixels, lane, relit),
+            4 => set_lane::<4>(pixels, lane, relit),
+            bytes => {
+                let samples = pixels[lane..].iter_mut().step_by(bytes);
+                samples.zip(&*relit).for_each(|(b, &r)| *b = round_to_u8(r));
             }
         }
     }
@@ -444,7 +581,6 @@ impl ChannelState {
     /// area's that the frame before had detail at, into `s.seen` by band.
     #[inline(always)]
     fn motion_row(&self, y: usize, (w, h): (usize, usize), step: usize, s: &mut Scratch) {
-        const SPAN: usize = 2 * MOTION_RADIUS + 1;
         let (lo, hi) = (
             y.saturating_sub(MOTION_RADIUS),
             (y + MOTION_RADIUS + 1).min(h),
@@ -452,8 +588,9 @@ impl ChannelState {
         let scale = 1.0 / (hi - lo) as f32;
         let (column, squared) = (&mut s.column, &s.squared);
         // Added from the top, as the blur of a whole map adds its rows.
-        if hi - lo == SPAN {
-            let rows: [&[f32]; SPAN] = std::array::from_fn(|r| &squared[(lo + r) % 3][..]);
+        if hi - lo == MOTION_SPAN {
+            let rows: [&[f32]; MOTION_SPAN] =
+                std::array::from_fn(|r| &squared[(lo + r) % MOTION_SPAN][..]);
             for (x, c) in column.iter_mut().enumerate() {
                 let mut sum = rows[0][x];
                 for row in &rows[1..] {
@@ -462,18 +599,20 @@ impl ChannelState {
                 *c = sum * scale;
             }
         } else {
-            column.copy_from_slice(&squared[lo % 3]);
+            column.copy_from_slice(&squared[lo % MOTION_SPAN]);
             for r in lo + 1..hi {
-                (column.iter_mut().zip(&squared[r % 3])).for_each(|(c, v)| *c += v);
+                (column.iter_mut().zip(&squared[r % MOTION_SPAN])).for_each(|(c, v)| *c += v);
             }
             column.iter_mut().for_each(|c| *c *= scale);
         }
+        box_row::<MOTION_SPAN>(&s.column, &mut s.motion);
+        let smooth = &s.smooth[y % SMOOTH_ROWS];
         let row = y * w..(y + 1) * w;
-        box_row::<SPAN>(&s.column, &mut s.motion[row.clone()]);
         let mut i = row.start.div_ceil(step) * step;
         while i < row.end {
-            if !self.detail[i].is_nan() {
-                s.seen[band(s.smooth[i])].push(s.motion[i]);
+            if self.detail[i] != NO_DETAIL {
+                let x = i - row.start;
+                s.seen[band(smooth[x])].push(s.motion[x]);
             }
             i += step;
         }
@@ -489,7 +628,7 @@ impl ChannelState {
         let [ox, oy, ow, oh] = self.area;
         let moved = &mut self.moved;
         moved.clear();
-        moved.resize(w * h, f32::NAN);
+        moved.resize(w * h, NO_DETAIL);
         if !self.detail.is_empty() {
             let (left, right) = (x0.max(ox), (x0 + w).min(ox + ow));
             for y in y0.max(oy)..(y0 + h).min(oy + oh) {
@@ -506,44 +645,77 @@ impl ChannelState {
     }
 }
 
-/// The smooth values of row `y` of a `w` × `h` map of `bytes`: their box
-/// blur of [`SPLIT_RADIUS`], shrinking at the borders, into `out`; `sums`
-/// and `column` hold the vertical pass.
+/// Byte `lane` of each of the first `out.len()` samples of `BYTES` bytes
+/// of `pixels`, into `out`.
 #[inline(always)]
-fn smooth_row(
-    bytes: &[u8],
-    (w, h): (usize, usize),
-    y: usize,
-    sums: &mut [u16],
-    column: &mut [f32],
-    out: &mut [f32],
-) {
-    const SPAN: usize = 2 * SPLIT_RADIUS + 1;
+fn lane_of<const BYTES: usize>(pixels: &[u8], lane: usize, out: &mut [u8]) {
+    for (v, pixel) in out.iter_mut().zip(pixels.chunks_exact(BYTES)) {
+        *v = pixel[lane];
+    }
+}
+
+/// Byte `lane` of each of the first `values.len()` samples of `BYTES` bytes
+/// of `pixels`: the value rounded.
+#[inline(always)]
+fn set_lane<const BYTES: usize>(pixels: &mut [u8], lane: usize, values: &[f32]) {
+    for (pixel, &r) in pixels.chunks_exact_mut(BYTES).zip(values) {
+        pixel[lane] = round_to_u8(r);
+    }
+}
+
+/// The smooth values of row `y` of a `w` × `h` map, whose rows round it
+/// `ring` holds by row modulo [`SPLIT_SPAN`]: the mean of the samples within
+/// [`SPLIT_RADIUS`] each way, the window shrinking at the borders, into
+/// `out`; `sums` holds the vertical sums. The sums are of whole numbers,
+/// exact in any order, and scaled once.
+#[inline(always)]
+fn smooth_row(ring: &[u8], (w, h): (usize, usize), y: usize, sums: &mut [u16], out: &mut [f32]) {
     let (lo, hi) = (
         y.saturating_sub(SPLIT_RADIUS),
         (y + SPLIT_RADIUS + 1).min(h),
     );
-    let scale = 1.0 / (hi - lo) as f32;
-    // Whole numbers: their sum is exact in any order, as a float or not.
-    if hi - lo == SPAN {
-        let rows: [&[u8]; SPAN] = std::array::from_fn(|r| &bytes[(lo + r) * w..(lo + r + 1) * w]);
-        for (x, c) in column.iter_mut().enumerate() {
+    let rows = hi - lo;
+    let row = |r: usize| &ring[(r % SPLIT_SPAN) * w..][..w];
+    if rows == SPLIT_SPAN {
+        let rows: [&[u8]; SPLIT_SPAN] = std::array::from_fn(row);
+        for (x, s) in sums.iter_mut().enumerate() {
             let mut sum = rows[0][x] as u16;
             for row in &rows[1..] {
                 sum += row[x] as u16;
             }
-            *c = sum as f32 * scale;
+            *s = sum;
         }
     } else {
-        let first = &bytes[lo * w..(lo + 1) * w];
-        sums.iter_mut().zip(first).for_each(|(s, &b)| *s = b as u16);
+        sums.iter_mut()
+            .zip(row(lo))
+            .for_each(|(s, &b)| *s = b as u16);
         for r in lo + 1..hi {
-            let row = &bytes[r * w..(r + 1) * w];
-            sums.iter_mut().zip(row).for_each(|(s, &b)| *s += b as u16);
+            sums.iter_mut()
+                .zip(row(r))
+                .for_each(|(s, &b)| *s += b as u16);
         }
-        (column.iter_mut().zip(&*sums)).for_each(|(c, &s)| *c = s as f32 * scale);
     }
-    box_row::<SPAN>(column, out);
+    let mean = |sum: u16, columns: usize| sum as f32 * (1.0 / (rows * columns) as f32);
+    if w >= SPLIT_SPAN {
+        // Samples with the whole window: out[k] sums sums[k - radius..=k + radius].
+        let m = w + 1 - SPLIT_SPAN;
+        let shifted: [&[u16]; SPLIT_SPAN] = std::array::from_fn(|s| &sums[s..s + m]);
+        for (k, o) in out[SPLIT_RADIUS..SPLIT_RADIUS + m].iter_mut().enumerate() {
+            let mut sum = shifted[0][k];
+            for run in &shifted[1..] {
+                sum += run[k];
+            }
+            *o = mean(sum, SPLIT_SPAN);
+        }
+    }
+    // The ends' shrunken windows (every sample, in a row narrower than one).
+    for k in (0..SPLIT_RADIUS.min(w)).chain(SPLIT_RADIUS.max(w.saturating_sub(SPLIT_RADIUS))..w) {
+        let (first, end) = (
+            k.saturating_sub(SPLIT_RADIUS),
+            (k + SPLIT_RADIUS + 1).min(w),
+        );
+        out[k] = mean(sums[first..end].iter().sum(), end - first);
+    }
 }
 
 /// A row's horizontal box blur of `SPAN` samples, shrinking at the ends:
@@ -573,13 +745,41 @@ fn box_row<const SPAN: usize>(src: &[f32], dst: &mut [f32]) {
     }
 }
 
+/// Filtered detail kept as a whole number of 1/[`DETAIL_STEPS`] of a level:
+/// half the memory of a float, which the denoising's time follows, the
+/// detail being larger than the caches and read and written every frame. A
+/// 128th of a level is far below what the rounding of the result to whole
+/// levels shows, and the largest detail, 255 levels, still fits.
+const DETAIL_STEPS: f32 = 128.0;
+/// The detail kept where there is none yet.
+const NO_DETAIL: i16 = i16::MIN;
+
+/// `detail` (under 256 levels either way) as it is kept.
+#[inline(always)]
+fn stored(detail: f32) -> i16 {
+    // Adding 1.5 · 2^23 leaves nothing below the units, so the sum is the
+    // steps rounded to the nearest whole number, ties to even, and the low
+    // 16 bits of the sum's bits are that number in two's complement (those of
+    // 1.5 · 2^23 are 0). The steps stay within ±32640, never `NO_DETAIL`.
+    const SHIFT: f32 = 12_582_912.0;
+    (detail * DETAIL_STEPS + SHIFT).to_bits() as i16
+}
+
+/// The detail `stored` keeps as `kept`; where there is none, the sample's
+/// new detail `d`: it then differs by nothing, which counts as no motion,
+/// and the new detail is taken whole.
+#[inline(always)]
+fn restored(kept: i16, d: f32) -> f32 {
+    if kept == NO_DETAIL {
+        d
+    } else {
+        kept as f32 * (1.0 / DETAIL_STEPS)
+    }
+}
+
 /// Updates `noise`, the noise's level per band of the smooth value, from the
-/// local mean squared differences `seen` in each band of one frame, and
-/// returns it for each band; None when no band is known.
-fn update_noise(
-    noise: &mut [Option<f32>; BANDS],
-    seen: &mut [Vec<f32>; BANDS],
-) -> Option<[f32; BANDS]> {
+/// local mean squared differences `seen` in each band of one frame.
+fn learn_noise(noise: &mut [Option<f32>; BANDS], seen: &mut [Vec<f32>; BANDS]) {
     for (noise, seen) in noise.iter_mut().zip(seen.iter_mut()) {
         if seen.len() < 32 {
             continue;
@@ -595,7 +795,11 @@ fn update_noise(
             None => estimate,
         });
     }
-    // A band with no estimate of its own takes the nearest band's.
+}
+
+/// The noise's level for each band, a band with no estimate of its own
+/// taking the nearest band's; None when no band is known.
+fn per_band(noise: &[Option<f32>; BANDS]) -> Option<[f32; BANDS]> {
     let known: Vec<(usize, f32)> = (noise.iter().enumerate())
         .filter_map(|(b, n)| n.map(|n| (b, n)))
         .collect();
@@ -611,15 +815,12 @@ fn update_noise(
     }))
 }
 
-/// The filtered detail of a sample of detail `d` and smooth value `smooth`,
-/// whose filtered detail was `past` (NaN where there was none), at a local
-/// mean squared difference `motion`; `inverse` is 1 over the noise per band.
+/// The filtered detail of a sample of detail `d` whose filtered detail was
+/// `past` (`restored`), at a local mean squared difference `ratio` times the
+/// noise's level.
 #[inline(always)]
-fn filtered(past: f32, d: f32, motion: f32, smooth: f32, inverse: &[f32; BANDS]) -> f32 {
-    let difference = d - past;
-    let share = new_share(motion * band_value(smooth, inverse));
-    let filtered = past + share * difference;
-    if difference.is_nan() { d } else { filtered }
+fn filtered(past: f32, d: f32, ratio: f32) -> f32 {
+    past + new_share(ratio) * (d - past)
 }
 
 /// The band of [`LEVELS`] a smooth value lies in.
@@ -627,18 +828,52 @@ fn band(smooth: f32) -> usize {
     (smooth.max(0.0) as usize / LEVELS).min(BANDS - 1)
 }
 
-/// `per_band[band(smooth)]`, by comparisons rather than an index, so that a
-/// loop over samples vectorises: `band` is the count of band starts
-/// (whole numbers) that the smooth value reaches.
+/// Each of a row's local mean squared differences `motion` over the noise's
+/// level at its smooth value, `inverse` being 1 over the noise per band.
 #[inline(always)]
-fn band_value(smooth: f32, per_band: &[f32; BANDS]) -> f32 {
-    let mut value = per_band[0];
-    for (b, &v) in per_band.iter().enumerate().skip(1) {
-        if smooth >= (b * LEVELS) as f32 {
-            value = v;
+fn over_noise(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
+    #[cfg(target_arch = "x86_64")]
+    if std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { over_noise_avx2(motion, smooth, inverse) };
+    }
+    for (m, &s) in motion.iter_mut().zip(smooth) {
+        *m *= inverse[band(s)];
+    }
+}
+
+/// `over_noise` with AVX2: the band's value is picked by a permutation of a
+/// vector that holds one band a lane, where the compiler, from an index,
+/// picks one sample at a time. The same band and product: the smooth value
+/// times 1/[`LEVELS`] (a power of two, so exact) truncated is `band`'s.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn over_noise_avx2(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
+    use std::arch::x86_64::*;
+    const LANES: usize = 8;
+    const { assert!(BANDS == LANES && LEVELS.is_power_of_two()) };
+    let n = motion.len().min(smooth.len());
+    let (motion, smooth) = (&mut motion[..n], &smooth[..n]);
+    let last_band = _mm256_set1_epi32(BANDS as i32 - 1);
+    let per_level = _mm256_set1_ps(1.0 / LEVELS as f32);
+    // SAFETY: each load and store reads or writes 8 floats of a slice of 8
+    // (`inverse`, or a chunk of 8).
+    unsafe {
+        let table = _mm256_loadu_ps(inverse.as_ptr());
+        for (m, s) in (motion.chunks_exact_mut(LANES)).zip(smooth.chunks_exact(LANES)) {
+            let s = _mm256_max_ps(_mm256_loadu_ps(s.as_ptr()), _mm256_setzero_ps());
+            let b = _mm256_min_epi32(_mm256_cvttps_epi32(_mm256_mul_ps(s, per_level)), last_band);
+            let over = _mm256_mul_ps(
+                _mm256_loadu_ps(m.as_ptr()),
+                _mm256_permutevar8x32_ps(table, b),
+            );
+            _mm256_storeu_ps(m.as_mut_ptr(), over);
         }
     }
-    value
+    let done = n - n % LANES;
+    for (m, &s) in motion[done..].iter_mut().zip(&smooth[done..]) {
+        *m *= inverse[band(s)];
+    }
 }
 
 /// Share of the new frame's detail at a local mean squared difference of

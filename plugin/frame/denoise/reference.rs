@@ -4,19 +4,23 @@
 
 use super::super::gain_field::dither;
 use super::super::{FrameMut, round_to_u8};
-use super::{BANDS, Disc, MOTION_RADIUS, NOISE_SAMPLES, PlaneView, SPLIT_RADIUS, band, new_share};
+use super::{
+    BANDS, Disc, MOTION_RADIUS, NO_DETAIL, NOISE_SAMPLES, PlaneView, SPLIT_RADIUS, band, new_share,
+    per_band, restored, stored,
+};
 
 /// What the plain denoiser keeps of one channel (`ChannelState`).
 #[derive(Default)]
 pub struct ReferenceChannel {
     area: [usize; 4],
-    pub detail: Vec<f32>,
+    pub detail: Vec<i16>,
     noise: [Option<f32>; BANDS],
 }
 
 #[derive(Default)]
 struct Scratch {
     values: Vec<f32>,
+    past: Vec<f32>,
     smooth: Vec<f32>,
     detail: Vec<f32>,
     difference: Vec<f32>,
@@ -111,16 +115,19 @@ impl ReferenceChannel {
             let bytes = data[start..].iter().step_by(plane.bytes);
             row.iter_mut().zip(bytes).for_each(|(v, &b)| *v = b as f32);
         }
-        box_blur(&s.values, (w, h), SPLIT_RADIUS, &mut s.smooth, &mut s.rows);
+        window_mean(&s.values, (w, h), SPLIT_RADIUS, &mut s.smooth);
         // The detail, and its difference from the filtered detail of the
         // frame before: NaN where there is none.
+        s.past.clear();
+        s.past
+            .extend(self.detail.iter().map(|&kept| restored(kept, f32::NAN)));
         for buffer in [&mut s.detail, &mut s.difference, &mut s.squared] {
             buffer.resize(n, 0.0);
         }
         for (((d, (&v, &smooth)), difference), past) in (s.detail.iter_mut())
             .zip(s.values.iter().zip(&s.smooth))
             .zip(s.difference.iter_mut())
-            .zip(&self.detail)
+            .zip(&s.past)
         {
             *d = v - smooth;
             *difference = *d - past;
@@ -139,8 +146,15 @@ impl ReferenceChannel {
             &mut s.motion,
             &mut s.rows,
         );
-        let Some(noise) = learn_noise(&mut self.noise, s) else {
-            self.detail.copy_from_slice(&s.detail);
+        // The noise's level the frames before taught, or where none did yet,
+        // this one; this one's motion teaches the next.
+        if per_band(&self.noise).is_none() {
+            learn_noise(&mut self.noise, s);
+        }
+        let known = per_band(&self.noise);
+        learn_noise(&mut self.noise, s);
+        let Some(noise) = known else {
+            (self.detail.iter_mut().zip(&s.detail)).for_each(|(kept, &d)| *kept = stored(d));
             return;
         };
         // Over the noise, per band: what a local mean squared difference is
@@ -151,11 +165,12 @@ impl ReferenceChannel {
             *share = new_share(motion * inverse[band(smooth)]);
         }
         for ((past, &d), (&difference, &share)) in
-            (self.detail.iter_mut().zip(&s.detail)).zip(s.difference.iter().zip(&s.squared))
+            (s.past.iter_mut().zip(&s.detail)).zip(s.difference.iter().zip(&s.squared))
         {
             let filtered = *past + share * difference;
             *past = if difference.is_nan() { d } else { filtered };
         }
+        (self.detail.iter_mut().zip(&s.past)).for_each(|(kept, &past)| *kept = stored(past));
         let sub = plane.subsample as f32;
         s.xs.clear();
         s.xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub));
@@ -174,7 +189,7 @@ impl ReferenceChannel {
                         .iter()
                         .zip(&s.dither[(y0 + y) % DITHER_ROWS]),
                 )
-                .zip((self.detail[row.clone()].iter().zip(&s.detail[row])).zip(&s.weight))
+                .zip((s.past[row.clone()].iter().zip(&s.detail[row])).zip(&s.weight))
             {
                 *r = v + weight * (filtered - d) + dither;
             }
@@ -193,7 +208,7 @@ impl ReferenceChannel {
             return;
         }
         let [x0, y0, w, h] = area;
-        let mut detail = vec![f32::NAN; w * h];
+        let mut detail = vec![NO_DETAIL; w * h];
         let [ox, oy, ow, oh] = self.area;
         if !self.detail.is_empty() {
             for y in y0.max(oy)..(y0 + h).min(oy + oh) {
@@ -208,7 +223,7 @@ impl ReferenceChannel {
 }
 
 /// `learn_noise` over whole maps.
-fn learn_noise(noise: &mut [Option<f32>; BANDS], scratch: &mut Scratch) -> Option<[f32; BANDS]> {
+fn learn_noise(noise: &mut [Option<f32>; BANDS], scratch: &mut Scratch) {
     let seen = &mut scratch.seen;
     seen.iter_mut().for_each(Vec::clear);
     let n = scratch.motion.len();
@@ -217,7 +232,24 @@ fn learn_noise(noise: &mut [Option<f32>; BANDS], scratch: &mut Scratch) -> Optio
             seen[band(scratch.smooth[i])].push(scratch.motion[i]);
         }
     }
-    super::update_noise(noise, seen)
+    super::learn_noise(noise, seen)
+}
+
+/// The mean of the whole numbers of a `w` × `h` map within `radius` each
+/// way, the window shrinking at the borders, into `out`: their sum, exact,
+/// times 1 over their count.
+fn window_mean(field: &[f32], (w, h): (usize, usize), radius: usize, out: &mut Vec<f32>) {
+    out.clear();
+    for y in 0..h {
+        let rows = y.saturating_sub(radius)..(y + radius + 1).min(h);
+        for x in 0..w {
+            let columns = x.saturating_sub(radius)..(x + radius + 1).min(w);
+            let sum: f32 = (rows.clone())
+                .flat_map(|r| &field[r * w + columns.start..r * w + columns.end])
+                .sum();
+            out.push(sum * (1.0 / (rows.len() * columns.len()) as f32));
+        }
+    }
 }
 
 /// A box blur of a `w` × `h` map into `out`, `radius` each way, shrinking at
