@@ -33,8 +33,8 @@
 //! the PyTorch peer and the hardware limit, and writes the tables and plot.
 //!
 //! What the output looks like, measured without ground truth (box edges, mottling
-//! over the face, pumping) on real footage and on the recordings `steady` and
-//! `wander`, is `examples/real_footage.rs`.
+//! over the face, pumping), on real footage and on these recordings (and
+//! `wander`), is `examples/real_footage.rs`.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -29,9 +29,10 @@
 //! (a film clip, for robustness only). The model is the element's default, the
 //! starter model for anyone, unless `--model` names another.
 //!
-//! The same measures then run on the simulator's `steady` and `wander`
-//! recordings (the first `--frames` frames; `wander` walks about the frame and
-//! out of it), relit to their own sunset target, with the RMSE (0-255) against
+//! The same measures then run on the simulator's recordings: `wander` (a
+//! person walking about the frame and out of it) and the benchmark's `steady`,
+//! `slow`, `cuts` and `call` (the first `--frames` frames of each), relit to
+//! their own sunset target, with the RMSE (0-255) against
 //! their exact ground truth over the square the element relit and over the
 //! whole frame, beside the input's.
 
@@ -427,7 +428,13 @@ fn main() -> Result<(), String> {
         "| recording | frames | box edge max % | box edge median % | mottling median % | over the face % | pumping (levels) | RMSE relit square | RMSE frame | input RMSE square | input RMSE frame |"
     );
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
-    for (recording, length) in [("steady", 300), ("wander", 45)] {
+    for (recording, length) in [
+        ("steady", 300),
+        ("wander", 45),
+        ("slow", 300),
+        ("cuts", 300),
+        ("call", 90),
+    ] {
         let dir = root.join(format!("target/recordings/{recording}-{length}"));
         ensure_recording(&dir, recording, length)?;
         let input = read_y4m(&dir.join("face.y4m"), frames)?;
