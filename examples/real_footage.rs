@@ -254,12 +254,8 @@ fn measure(
             .iter()
             .zip(&changed)
             .map(|(i, d)| box_edge_score(i, d));
-        let face_mottled = input
-            .iter()
-            .zip(&changed)
-            .zip(&regions)
-            .map(|((i, d), &r)| mottling(i, d, r.face_within()));
-        (edge.fold(0.0, f64::max), median(face_mottled.collect()))
+        let face_mottled = mottlings(&input, &changed, &regions).1;
+        (edge.fold(0.0, f64::max), median(face_mottled))
     });
     let edges: Vec<BoxEdge> = changed
         .iter()
@@ -280,21 +276,10 @@ fn measure(
         worst.along
     );
     let edges: Vec<f64> = edges.iter().map(|e| e.score).collect();
-    // Over the relit square and over the face within it.
-    let (mottled, face_mottled): (Vec<f64>, Vec<f64>) = changed
-        .iter()
-        .zip(&output)
-        .zip(&regions)
-        .map(|((i, o), &r)| (mottling(i, o, r), mottling(i, o, r.face_within())))
-        .unzip();
+    let (mottled, face_mottled) = mottlings(&changed, &output, &regions);
     let through_format = through_format.map(|(i, o)| {
         let edge = i.iter().zip(&o).map(|(i, o)| box_edge_score(i, o));
-        let (mottled, face_mottled): (Vec<f64>, Vec<f64>) = i
-            .iter()
-            .zip(&o)
-            .zip(&regions)
-            .map(|((i, o), &r)| (mottling(i, o, r), mottling(i, o, r.face_within())))
-            .unzip();
+        let (mottled, face_mottled) = mottlings(&i, &o, &regions);
         (
             edge.fold(0.0, f64::max),
             median(mottled),
@@ -338,6 +323,17 @@ fn measure(
         face_mottling_median: median(face_mottled),
         pumping: pumping(&means),
     })
+}
+
+/// Per frame, the mottling of `output` against `input` over the relit square
+/// (`regions`) and over the face within it.
+fn mottlings(input: &[RgbImage], output: &[RgbImage], regions: &[Region]) -> (Vec<f64>, Vec<f64>) {
+    input
+        .iter()
+        .zip(output)
+        .zip(regions)
+        .map(|((i, o), &r)| (mottling(i, o, r), mottling(i, o, r.face_within())))
+        .unzip()
 }
 
 /// What `real_footage` prints about a clip below its tables: where its
