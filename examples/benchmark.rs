@@ -5,6 +5,7 @@
 //! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
 //! ```
 //!
 //! `--reuse` measures what the reuse interval buys where the network dominates:
@@ -32,9 +33,12 @@
 //! `<out>/element.json`; `python -m lsyd.evaluation.benchmark` adds the held-out accuracy,
 //! the PyTorch peer and the hardware limit, and writes the tables and plot.
 //!
-//! What the output looks like, measured without ground truth (box edges, mottling
-//! over the face, pumping), on real footage and on these recordings (and
-//! `wander`), is `examples/real_footage.rs`.
+//! `--quality` measures what the output looks like without ground truth (box
+//! edges, mottling over the face, pumping) on real footage and on the
+//! recordings (and `wander`), with the element's defaults fed RGB and I420,
+//! and writes `<out>/quality.md` (`lsydrelight_testkit::scorecard`; before/after
+//! images into `results/tmp/quality/`, not committed). `examples/real_footage.rs` prints the same
+//! report for other settings.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -45,8 +49,10 @@ use gst::prelude::*;
 use lsydrelight_testkit::{
     checkout,
     flags::flag,
+    footage::Format,
     init,
     recording::{ensure_recording, score_recording},
+    scorecard::{Setup, report},
 };
 use serde::{Deserialize, Serialize};
 
@@ -888,6 +894,42 @@ fn first_frame(repeats: usize) -> Result<Vec<f64>, String> {
     Ok(times)
 }
 
+/// The scorecard's report with the element's defaults, fed RGB and I420, on
+/// the first `frames` frames of each clip and recording.
+fn quality(frames: usize) -> Result<String, String> {
+    init();
+    let root = checkout();
+    let (model, target) = (
+        gstlsydrelight::paths::default_model(),
+        root.join("models/targets/sunset.png"),
+    );
+    let mut text = format!(
+        "# What the output looks like, without ground truth\n\n\
+         `cargo run --release --example benchmark -- --quality --frames {frames}`: the element's \
+         defaults and default model, no monitor stream, relit to the sunset target (each \
+         recording to its own); box edge and mottling in percent, pumping in levels, RMSE on \
+         0-255 (`lsydrelight_testkit::scorecard`).\n"
+    );
+    for format in [Format::Rgb, Format::I420] {
+        let setup = Setup {
+            model: &model,
+            target: &target,
+            format,
+            denoise: true,
+        };
+        text.push_str(&format!("\n## Fed {format:?}\n\n"));
+        text.push_str(&report(
+            &setup,
+            &root.join("target/real-media"),
+            frames,
+            &root
+                .join("results/tmp/quality")
+                .join(format!("{format:?}").to_lowercase()),
+        )?);
+    }
+    Ok(text)
+}
+
 fn main() -> Result<(), String> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.first().map(String::as_str) == Some("--child") {
@@ -926,6 +968,15 @@ fn main() -> Result<(), String> {
             .unwrap_or_default();
         let table = stages(rounds, &only)?;
         let path = out.join("stages.md");
+        std::fs::write(&path, &table).map_err(|e| e.to_string())?;
+        print!("{table}");
+        eprintln!("wrote {}", path.display());
+        return Ok(());
+    }
+    if args.iter().any(|a| a == "--quality") {
+        let frames = flag("--frames").map_or(Ok(90), |r| r.parse().map_err(|_| "bad --frames"))?;
+        let table = quality(frames)?;
+        let path = out.join("quality.md");
         std::fs::write(&path, &table).map_err(|e| e.to_string())?;
         print!("{table}");
         eprintln!("wrote {}", path.display());

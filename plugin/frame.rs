@@ -194,6 +194,7 @@ pub struct Frame<'a> {
 
 /// A frame that owns its planes, each row `padding` bytes longer than its
 /// pixels: for code that makes frames without GStreamer (tests, benchmarks).
+#[derive(Clone)]
 pub struct OwnedFrame {
     pub format: PixelFormat,
     pub width: usize,

@@ -4,10 +4,11 @@
 //! no box edge, no colour blotches, no breathing brightness. The real media are
 //! fetched by `scripts/setup.sh full` into `target/real-media`; without them
 //! those tests say so and pass. `examples/real_footage` prints the same
-//! measures over 90 frames. The element is fed packed RGB, with its defaults,
-//! and, as webcams deliver frames, I420, with its denoising off: with it on
-//! the measures compare the output with the input as the denoising left it
-//! (`footage::denoised`), which is made in RGB only.
+//! measures over 90 frames. The element is fed packed RGB and, as webcams
+//! deliver frames, I420, with its defaults: its denoising on, so the measures
+//! compare the output with the input as the denoising left it
+//! (`footage::denoised`). I420 is read as it carries light and colour
+//! (`quality::View`).
 
 use std::path::PathBuf;
 
@@ -16,7 +17,7 @@ use lsydrelight_testkit::{
     checkout,
     footage::{Format, decode, denoised, read_y4m, relight, through},
     init,
-    quality::{Region, box_edge_score, mean_level, mottling, pumping},
+    quality::{Region, View, box_edge_score, mean_level, mottling, pumping},
     recording::ensure_recording,
 };
 
@@ -45,24 +46,17 @@ struct Measures {
     means: (f64, f64),
 }
 
-/// Per frame, the element fed `format` (RGB with the denoising on, as by
-/// default; I420 with it off): its output against what its lighting change
-/// was applied to (the input after the same round trip through `format`, or
-/// the input denoised), over the square the element relit (the centred
+/// Per frame, the element fed `format` with its defaults: its output
+/// against what its lighting change was applied to (the input it was fed, as
+/// the denoising left it), over the square the element relit (the centred
 /// full-height square where it marked none).
 fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<Measures> {
     let model = gstlsydrelight::paths::default_model();
-    let denoise = format == Format::Rgb;
-    let (output, relits): (Vec<_>, Vec<_>) = relight(input, &model, &target, format, denoise)
+    let (output, relits): (Vec<_>, Vec<_>) = relight(input, &model, &target, format, true)
         .unwrap()
         .into_iter()
         .unzip();
-    let input = through(input.to_vec(), format).unwrap();
-    let changed = if denoise {
-        denoised(&input, &relits).unwrap()
-    } else {
-        input
-    };
+    let changed = denoised(&through(input, format).unwrap(), &relits).unwrap();
     changed
         .iter()
         .zip(output)
@@ -76,11 +70,16 @@ fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<Measures>
                     size,
                 }
             });
+            let (i, o) = (i.frame(), o.frame());
+            let (colour_in, colour_out) = (View::colour(i), View::colour(o));
             Measures {
-                box_edge: box_edge_score(i, &o),
-                mottling: mottling(i, &o, region),
-                face_mottling: mottling(i, &o, region.face_within()),
-                means: (mean_level(i, region), mean_level(&o, region)),
+                box_edge: box_edge_score(&View::brightness(i), &View::brightness(o)),
+                mottling: mottling(&colour_in, &colour_out, region),
+                face_mottling: mottling(&colour_in, &colour_out, region.face_within()),
+                means: (
+                    mean_level(&colour_in, region),
+                    mean_level(&colour_out, region),
+                ),
             }
         })
         .collect()
@@ -154,11 +153,10 @@ fn a_real_portrait_in_i420_takes_the_change_each_pixel_would_in_rgb() {
     };
     let m = measure(&decode(&path, 12).unwrap(), sunset(), Format::I420);
     let last = m.last().unwrap();
-    // 4.3%, 1.94% and over the face 1.85% when written; 4.2% and 5.78% when
-    // the chroma change was taken from the region's smoothed colour rather
-    // than each pixel's. The RGB path's own output converted to I420 scores
-    // 4.9%, 3.09% and 3.54% against the input converted alike: the format's
-    // own floor (README, Real faces).
+    // 2.8%, 1.28% and over the face 0.98% when written (90 frames, read as
+    // I420 carries them). Read through 8-bit RGB instead, 4.3%, 1.94% and
+    // 1.85%; 4.2% and 5.78% when the chroma change was taken from the
+    // region's smoothed colour rather than each pixel's.
     assert!(last.box_edge < 10.0, "box edge {:.1}%", last.box_edge);
     assert!(last.mottling < 2.0, "mottling {:.2}%", last.mottling);
     assert!(
@@ -176,14 +174,19 @@ fn a_film_clip_in_i420_is_relit_as_in_rgb() {
     };
     let m = measure(&decode(&path, 90).unwrap(), sunset(), Format::I420);
     let box_edge = largest(m.iter().map(|m| m.box_edge));
-    let mottled = median(m.iter().map(|m| m.mottling));
+    let face_mottled = median(m.iter().map(|m| m.face_mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 28.8%, 11.44% and 0.74 levels when written; 40.5% and 22.90% with the
-    // chroma change from the region's smoothed colour. The RGB path's output
-    // converted to I420 scores 29.5% and 13.64%: on this dark clip the
-    // format's rounding and clipping of near-black pixels dominate both.
-    assert!(box_edge < 32.0, "box edge {box_edge:.1}%");
-    assert!(mottled < 14.0, "mottling {mottled:.2}%");
+    // 9.7%, 5.62% and 0.75 levels when written. Read through 8-bit RGB, the
+    // box edge was 28.8%: the clipping of near-black pixels that share a
+    // chroma sample with brighter ones. Over the face, mottling is the
+    // rounding of chroma on this dark clip's dark pixels: the RGB path's
+    // output and its input both converted to I420 score 6.7% (README, Real
+    // faces); this bound holds the measured figure.
+    assert!(box_edge < 10.0, "box edge {box_edge:.1}%");
+    assert!(
+        face_mottled < 6.0,
+        "mottling over the face {face_mottled:.2}%"
+    );
     assert!(pumped < 1.0, "pumping {pumped:.2} levels");
 }
 

@@ -1,13 +1,16 @@
 //! Footage through the element without a monitor stream, for the measures
 //! that need no ground truth ([`crate::quality`]): decoding a clip or a still
 //! to RGB frames, and relighting them in packed RGB or, as webcams deliver
-//! them, in I420.
+//! them, in I420. The element's input and output come back in the format it
+//! worked in ([`OwnedFrame`]s), for the measures to read as that format
+//! carries them ([`crate::quality::View`]).
 
 use std::path::Path;
 
 use deskstage::monitor::RgbImage;
 use gst::prelude::*;
-use gstlsydrelight::frame::{Crop, DetailDenoiser, FrameMut, PixelFormat, YuvMatrix};
+use gstlsydrelight::frame::{Crop, DetailDenoiser, OwnedFrame, PixelFormat, YuvMatrix};
+use gstlsydrelight::lsydrelight::frame_view;
 
 use crate::quality::Region;
 use crate::video::{FRAME, frame_time, rgb_caps, to_rgb};
@@ -86,30 +89,63 @@ impl Format {
         }
     }
 
-    /// The conversion into this format and the one back to RGB, round an element.
-    fn around(self, element: &str) -> String {
+    /// RGB frames converted into this format, then `element`.
+    fn into(self, element: &str) -> String {
         match self {
             Format::Rgb => element.to_string(),
-            // No dither: the round trip alone must not make noise the measures would count.
-            Format::I420 => format!(
-                "videoconvert dither=none ! video/x-raw,format=I420 ! {element} ! \
-                 videoconvert dither=none ! video/x-raw,format=RGB"
-            ),
+            // No dither: the conversion alone must not make noise the measures would count.
+            Format::I420 => {
+                format!("videoconvert dither=none ! video/x-raw,format=I420 ! {element}")
+            }
         }
     }
 }
 
-/// `frames` as they come out of a round trip through `format` (as they are in
-/// RGB): the input a camera in that format gives, to compare the element's
+/// `frames` converted into `format`: the input a camera in that format
+/// gives, byte for byte what [`relight`] feeds the element, to compare its
 /// output with.
-pub fn through(frames: Vec<RgbImage>, format: Format) -> Result<Vec<RgbImage>, String> {
+pub fn through(frames: &[RgbImage], format: Format) -> Result<Vec<OwnedFrame>, String> {
     if format == Format::Rgb {
-        return Ok(frames);
+        return Ok(frames.iter().map(packed).collect());
     }
-    Ok(run(&frames, &format.around("identity"))?
+    Ok(run(frames, &format.into("identity"))?
         .into_iter()
-        .map(|(img, _)| img)
+        .map(|(frame, _)| frame)
         .collect())
+}
+
+/// An RGB image as a frame.
+pub fn packed(img: &RgbImage) -> OwnedFrame {
+    OwnedFrame {
+        format: PixelFormat::Rgb,
+        width: img.width,
+        height: img.height,
+        planes: vec![(img.data.clone(), 3 * img.width)],
+        matrix: YuvMatrix::BT601_LIMITED,
+    }
+}
+
+/// A copy of a buffer of `caps` (packed RGB or I420) as a frame.
+fn owned(buffer: &gst::Buffer, caps: &gst::CapsRef) -> Result<OwnedFrame, String> {
+    let info = gst_video::VideoInfo::from_caps(caps).map_err(|e| e.to_string())?;
+    let mapped = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
+        .map_err(|e| e.to_string())?;
+    let frame = frame_view(&mapped).ok_or(format!("{caps}: not a format the element takes"))?;
+    let planes = match frame.format {
+        PixelFormat::Rgb => 1,
+        PixelFormat::I420 => 3,
+        other => return Err(format!("{other:?}: the measures read RGB and I420")),
+    };
+    Ok(OwnedFrame {
+        format: frame.format,
+        width: frame.width,
+        height: frame.height,
+        planes: frame.planes[..planes]
+            .iter()
+            .map(|p| (p.data.to_vec(), p.stride))
+            .collect(),
+        matrix: frame.matrix,
+    })
 }
 
 /// What the element says it relit in a frame: its `face` region-of-interest
@@ -125,8 +161,9 @@ pub struct Relit {
     pub shown: Option<(f32, usize)>,
 }
 
-/// The frames relit by the element with no monitor stream by `model`, each
-/// with what the element relit in it (None when it relit nothing).
+/// The frames relit by the element with no monitor stream by `model`, fed
+/// in `format` and in that format, each with what the element relit in it
+/// (None when it relit nothing).
 ///
 /// `denoise` sets the element's property of that name. The measures of
 /// [`crate::quality`] read the lighting change as the output over the input,
@@ -140,56 +177,51 @@ pub fn relight(
     target: &Path,
     format: Format,
     denoise: bool,
-) -> Result<Vec<(RgbImage, Option<Relit>)>, String> {
+) -> Result<Vec<(OwnedFrame, Option<Relit>)>, String> {
     let element = format!(
         "lsydrelight name=r denoise={denoise} model-location=\"{}\" target-location=\"{}\"",
         model.display(),
         target.display()
     );
-    run(frames, &format.around(&element))
+    run(frames, &format.into(&element))
 }
 
-/// `frames` (RGB) as the element's denoising leaves them before its lighting
-/// change: filtered by the element's own code (`DetailDenoiser`) round the
-/// square, with the fade and strength the element says it relit each frame
-/// with (`relit`, from [`relight`] fed RGB). A frame it relit nothing in
-/// passes, and the filtering starts afresh after it, as the element's does.
-pub fn denoised(frames: &[RgbImage], relit: &[Option<Relit>]) -> Result<Vec<RgbImage>, String> {
+/// `frames` (the element's input, from [`through`]) as the element's
+/// denoising leaves them before its lighting change: filtered by the
+/// element's own code (`DetailDenoiser`) round the square, with the fade and
+/// strength the element says it relit each frame with (`relit`, from
+/// [`relight`]). A frame it relit nothing in passes, and the filtering starts
+/// afresh after it, as the element's does.
+pub fn denoised(frames: &[OwnedFrame], relit: &[Option<Relit>]) -> Result<Vec<OwnedFrame>, String> {
     let mut denoiser = DetailDenoiser::default();
     frames
         .iter()
         .zip(relit)
-        .map(|(img, relit)| {
+        .map(|(frame, relit)| {
+            let mut frame = frame.clone();
             let Some(relit) = relit else {
                 denoiser.reset();
-                return Ok(img.clone());
+                return Ok(frame);
             };
             let (strength, feather) = relit.shown.ok_or(
                 "the element's face region came without its lsydrelight parameters \
-                 (an element after it dropped them): feed the element RGB",
+                 (an element after it dropped them)",
             )?;
-            let mut data = img.data.clone();
-            let mut frame = FrameMut {
-                format: PixelFormat::Rgb,
-                width: img.width,
-                height: img.height,
-                planes: [(&mut data, 3 * img.width), (&mut [], 0), (&mut [], 0)],
-                matrix: YuvMatrix::BT601_LIMITED,
-            };
             let Region { x, y, size } = relit.region;
-            denoiser.apply(&mut frame, Crop { x, y, size }, feather, strength);
-            Ok(RgbImage {
-                width: img.width,
-                height: img.height,
-                data,
-            })
+            denoiser.apply(
+                &mut frame.frame_mut(),
+                Crop { x, y, size },
+                feather,
+                strength,
+            );
+            Ok(frame)
         })
         .collect()
 }
 
 /// `frames` pushed through `middle` (a gst-launch fragment) one at a time,
-/// with what the element relit in each.
-fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Relit>)>, String> {
+/// as they come out of it, with what the element relit in each.
+fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(OwnedFrame, Option<Relit>)>, String> {
     let (w, h) = (frames[0].width as u32, frames[0].height as u32);
     let caps = rgb_caps(w, h, 30);
     let pipeline = gst::parse::launch(&format!(
@@ -221,6 +253,7 @@ fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Relit>
         src.push_buffer(buffer).map_err(|e| e.to_string())?;
         let sample = sink.pull_sample().map_err(|_| "the element stopped")?;
         let buffer = sample.buffer_owned().expect("a buffer");
+        let frame = owned(&buffer, sample.caps().expect("caps"))?;
         let relit = match buffer.meta::<gst_video::VideoRegionOfInterestMeta>() {
             None => None,
             Some(roi) => {
@@ -243,7 +276,7 @@ fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(RgbImage, Option<Relit>
                 })
             }
         };
-        out.push((to_rgb(&buffer, &caps), relit));
+        out.push((frame, relit));
     }
     let _ = src.end_of_stream();
     pipeline

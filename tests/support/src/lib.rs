@@ -12,6 +12,8 @@
 //!   mottling, pumping), for real footage;
 //! - [`footage`]: real clips and the simulator's recordings decoded to RGB, and
 //!   relit by the element with no monitor stream, for those measures;
+//! - [`scorecard`]: those measures on real clips and recordings, as the report
+//!   `examples/real_footage` prints and `examples/benchmark --quality` writes;
 //! - [`flow`]: classical optical flow, and TecoGAN's tOF built on it;
 //! - [`flags`]: the examples' command-line flags.
 //!
@@ -26,6 +28,7 @@ pub mod footage;
 pub mod person;
 pub mod quality;
 pub mod recording;
+pub mod scorecard;
 pub mod video;
 
 /// Registers the plugin statically (once) so pipelines find `lsydrelight`.

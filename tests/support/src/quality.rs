@@ -12,10 +12,171 @@
 //!   region's mean (output minus input), in levels, leaving out cuts: brightness
 //!   that breathes while the input is steady.
 //!
-//! Images are packed 8-bit sRGB ([`RgbImage`]).
+//! The measures read images through [`Pixels`]: packed 8-bit sRGB
+//! ([`RgbImage`]), or a frame in the format the element worked in ([`View`]).
+//! A Y'CbCr frame is read as it carries light and colour: the box edge on its
+//! luma plane, the mottling at the resolution of its chroma planes, both from
+//! the 8-bit samples in floating point. Decoded to 8-bit RGB instead, a 4:2:0
+//! frame's near-black pixels take colour from the chroma sample they share
+//! with brighter ones and are clipped and rounded, which these ratios read as
+//! steps and blotches that no change of the element could remove.
 
 use deskstage::monitor::RgbImage;
 use gstlsydrelight::face::{CROP_LIFT, CROP_SIDE};
+use gstlsydrelight::frame::{Frame, PixelFormat};
+
+/// An image as the measures read it.
+pub trait Pixels {
+    /// Width and height, in the measure's pixels.
+    fn size(&self) -> (usize, usize);
+    /// Frame pixels one of the measure's pixels spans along each axis (more
+    /// than one where a format carries colour at a lower resolution).
+    fn step(&self) -> usize {
+        1
+    }
+    /// R, G and B of pixel (x, y), in [0, 1] (not rounded).
+    fn rgb(&self, x: usize, y: usize) -> [f64; 3];
+}
+
+impl Pixels for RgbImage {
+    fn size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    fn rgb(&self, x: usize, y: usize) -> [f64; 3] {
+        let i = 3 * (y * self.width + x);
+        [0, 1, 2].map(|c| self.data[i + c] as f64 / 255.0)
+    }
+}
+
+/// A frame in packed RGB or I420, read one of three ways.
+#[derive(Clone, Copy)]
+pub struct View<'a> {
+    frame: Frame<'a>,
+    reading: Reading,
+}
+
+#[derive(Clone, Copy, PartialEq)]
+enum Reading {
+    /// Each pixel's RGB; a Y'CbCr pixel with the chroma of the sample it shares.
+    Pixels,
+    /// Luma alone, as grey: what a Y'CbCr frame carries at full resolution.
+    Luma,
+    /// One pixel per chroma sample: the mean luma of the pixels it covers,
+    /// with its Cb and Cr.
+    ChromaSamples,
+}
+
+impl<'a> View<'a> {
+    fn new(frame: Frame<'a>, reading: Reading) -> View<'a> {
+        assert!(
+            matches!(frame.format, PixelFormat::Rgb | PixelFormat::I420),
+            "the measures read RGB and I420 frames, not {:?}",
+            frame.format
+        );
+        View { frame, reading }
+    }
+
+    /// Each pixel in RGB (for images and errors against the truth).
+    pub fn pixels(frame: Frame<'a>) -> View<'a> {
+        View::new(frame, Reading::Pixels)
+    }
+
+    /// What the box edge and the change map read: luma, at full resolution.
+    pub fn brightness(frame: Frame<'a>) -> View<'a> {
+        View::new(frame, Reading::Luma)
+    }
+
+    /// What mottling and mean levels read: colour, at the resolution the
+    /// frame's format carries it.
+    pub fn colour(frame: Frame<'a>) -> View<'a> {
+        View::new(frame, Reading::ChromaSamples)
+    }
+
+    fn is_yuv(&self) -> bool {
+        self.frame.format == PixelFormat::I420
+    }
+
+    fn byte(&self, plane: usize, x: usize, y: usize) -> f32 {
+        let p = &self.frame.planes[plane];
+        p.data[y * p.stride + x] as f32
+    }
+
+    /// R, G and B of 8-bit Y, Cb, Cr as f32, in [0, 1]; negative values (only
+    /// from rounding) count as black.
+    fn yuv_rgb(&self, luma: f32, cb: f32, cr: f32) -> [f64; 3] {
+        self.frame
+            .matrix
+            .to_rgb(luma, cb, cr)
+            .map(|v| v.max(0.0) as f64)
+    }
+
+    /// The RGB image of [`View::pixels`], rounded to 8 bits.
+    pub fn to_rgb_image(&self) -> RgbImage {
+        let (w, h) = self.size();
+        RgbImage {
+            width: w,
+            height: h,
+            data: (0..h)
+                .flat_map(|y| (0..w).map(move |x| (x, y)))
+                .flat_map(|(x, y)| {
+                    self.rgb(x, y)
+                        .map(|v| (255.0 * v).round().clamp(0.0, 255.0) as u8)
+                })
+                .collect(),
+        }
+    }
+}
+
+impl Pixels for View<'_> {
+    fn size(&self) -> (usize, usize) {
+        let (w, h) = (self.frame.width, self.frame.height);
+        match self.reading {
+            Reading::ChromaSamples if self.is_yuv() => (w.div_ceil(2), h.div_ceil(2)),
+            _ => (w, h),
+        }
+    }
+
+    fn step(&self) -> usize {
+        if self.reading == Reading::ChromaSamples && self.is_yuv() {
+            2
+        } else {
+            1
+        }
+    }
+
+    fn rgb(&self, x: usize, y: usize) -> [f64; 3] {
+        if !self.is_yuv() {
+            let p = &self.frame.planes[0];
+            let i = y * p.stride + 3 * x;
+            let rgb = [0, 1, 2].map(|c| p.data[i + c] as f64 / 255.0);
+            return match self.reading {
+                Reading::Luma => [luma(rgb); 3],
+                _ => rgb,
+            };
+        }
+        let chroma = |cx, cy| (self.byte(1, cx, cy), self.byte(2, cx, cy));
+        match self.reading {
+            Reading::Pixels => {
+                let (cb, cr) = chroma(x / 2, y / 2);
+                self.yuv_rgb(self.byte(0, x, y), cb, cr)
+            }
+            // Neutral chroma: grey of the pixel's luma.
+            Reading::Luma => self.yuv_rgb(self.byte(0, x, y), 128.0, 128.0),
+            Reading::ChromaSamples => {
+                let (w, h) = (self.frame.width, self.frame.height);
+                let (xs, ys) = (2 * x..(2 * x + 2).min(w), 2 * y..(2 * y + 2).min(h));
+                let n = (xs.len() * ys.len()) as f32;
+                let sum: f32 = ys
+                    .flat_map(|py| xs.clone().map(move |px| (px, py)))
+                    .map(|(px, py)| self.byte(0, px, py))
+                    .sum();
+                let (cb, cr) = chroma(x, y);
+                self.yuv_rgb(sum / n, cb, cr)
+            }
+        }
+    }
+}
 
 /// Added to sRGB values in [0, 1] before taking logs: two levels, so the
 /// rounding of near-black pixels does not count as a large ratio.
@@ -47,25 +208,37 @@ impl Region {
     }
 }
 
-/// Per pixel: the natural log of output over input of `value(pixel)`.
-fn log_ratio(input: &RgbImage, output: &RgbImage, value: impl Fn(&[u8]) -> f64) -> Vec<f64> {
-    assert_eq!(
-        (input.width, input.height),
-        (output.width, output.height),
-        "input and output sizes differ"
-    );
-    input
-        .data
-        .chunks_exact(3)
-        .zip(output.data.chunks_exact(3))
-        .map(|(i, o)| ((value(o) + LOG_EPSILON) / (value(i) + LOG_EPSILON)).ln())
+/// Per pixel, row by row: the natural log of output over input of `value(pixel)`.
+fn log_ratio(
+    input: &impl Pixels,
+    output: &impl Pixels,
+    value: impl Fn([f64; 3]) -> f64,
+) -> Vec<f64> {
+    let (w, h) = input.size();
+    assert_eq!((w, h), output.size(), "input and output sizes differ");
+    (0..h)
+        .flat_map(|y| (0..w).map(move |x| (x, y)))
+        .map(|(x, y)| {
+            let (i, o) = (value(input.rgb(x, y)), value(output.rgb(x, y)));
+            ((o + LOG_EPSILON) / (i + LOG_EPSILON)).ln()
+        })
         .collect()
 }
 
-/// Rec. 709 luma of an sRGB pixel, in [0, 1]. Ratios of sRGB values are what a
+/// Rec. 709 luma of an sRGB pixel in [0, 1]. Ratios of sRGB values are what a
 /// gain applied to the picture changes, whatever the brightness underneath.
-fn luma(p: &[u8]) -> f64 {
-    (0.2126 * p[0] as f64 + 0.7152 * p[1] as f64 + 0.0722 * p[2] as f64) / 255.0
+fn luma(p: [f64; 3]) -> f64 {
+    0.2126 * p[0] + 0.7152 * p[1] + 0.0722 * p[2]
+}
+
+/// `region` (in frame pixels) in the pixels of `image`.
+fn in_pixels_of(region: Region, image: &impl Pixels) -> Region {
+    let step = image.step();
+    Region {
+        x: region.x / step,
+        y: region.y / step,
+        size: region.size.div_ceil(step),
+    }
 }
 
 /// Box blur of radius `r` (a (2r+1)² box, clipped at the borders) of a w × h field.
@@ -103,21 +276,21 @@ pub struct BoxEdge {
 }
 
 /// The box-edge score of a relit frame against its input, in percent.
-pub fn box_edge_score(input: &RgbImage, output: &RgbImage) -> f64 {
+pub fn box_edge_score(input: &impl Pixels, output: &impl Pixels) -> f64 {
     box_edge(input, output).score
 }
 
 /// The smoothed log ratio of output to input luma that [`box_edge_score`] reads.
-fn smoothed_change(input: &RgbImage, output: &RgbImage) -> (Vec<f64>, usize) {
+fn smoothed_change(input: &impl Pixels, output: &impl Pixels) -> (Vec<f64>, usize) {
     // Smoothed over about 1% of the frame height, so noise and texture do not count.
-    let (w, h) = (input.width, input.height);
+    let (w, h) = input.size();
     let r = (h / 100).max(1);
     (box_blur(&log_ratio(input, output, luma), w, h, r), r)
 }
 
 /// The largest coherent step of a relit frame's change against its input.
-pub fn box_edge(input: &RgbImage, output: &RgbImage) -> BoxEdge {
-    let (w, h) = (input.width, input.height);
+pub fn box_edge(input: &impl Pixels, output: &impl Pixels) -> BoxEdge {
+    let (w, h) = input.size();
     let (ratio, r) = smoothed_change(input, output);
     let step = 2 * r;
     let run = (h / 5).max(1);
@@ -141,11 +314,12 @@ pub fn box_edge(input: &RgbImage, output: &RgbImage) -> BoxEdge {
 /// The change a relit frame makes, as an image: the smoothed log ratio of
 /// output to input luma that [`box_edge_score`] reads, mid grey for none,
 /// lighter for brighter, black or white at a factor of e^±0.75 (about 2.1).
-pub fn change_map(input: &RgbImage, output: &RgbImage) -> RgbImage {
+pub fn change_map(input: &impl Pixels, output: &impl Pixels) -> RgbImage {
     let (ratio, _) = smoothed_change(input, output);
+    let (width, height) = input.size();
     RgbImage {
-        width: input.width,
-        height: input.height,
+        width,
+        height,
         data: ratio
             .iter()
             .flat_map(|v| [(127.5 + 170.0 * v).round().clamp(0.0, 255.0) as u8; 3])
@@ -190,7 +364,7 @@ fn coherent_step(
 }
 
 /// Mottling of a relit frame against its input over `face`, in percent.
-pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
+pub fn mottling(input: &impl Pixels, output: &impl Pixels, face: Region) -> f64 {
     let terms = mottling_terms(input, output, face);
     let sum: f64 = terms.iter().map(|(_, t)| t).sum();
     100.0 * (sum / (3 * terms.len()).max(1) as f64).sqrt()
@@ -201,15 +375,16 @@ pub fn mottling(input: &RgbImage, output: &RgbImage, face: Region) -> f64 {
 /// up), the band's share of the pixels of `face` and of the mottling's sum of
 /// squares, both in [0, 1].
 pub fn mottling_by_luma(
-    input: &RgbImage,
-    output: &RgbImage,
+    input: &impl Pixels,
+    output: &impl Pixels,
     face: Region,
     edges: &[f64],
 ) -> Vec<(f64, f64)> {
     let terms = mottling_terms(input, output, face);
+    let w = input.size().0;
     let mut bands = vec![(0.0, 0.0); edges.len() + 1];
     for &(i, t) in &terms {
-        let level = 255.0 * luma(&input.data[3 * i..3 * i + 3]);
+        let level = 255.0 * luma(input.rgb(i % w, i / w));
         let band = edges.partition_point(|&e| e <= level);
         bands[band].0 += 1.0;
         bands[band].1 += t;
@@ -224,13 +399,14 @@ pub fn mottling_by_luma(
         .collect()
 }
 
-/// Per pixel of `face` (its index in the image): the squares, summed over
-/// the channels, of the colour part of its per-channel log gain (the
-/// channel's less the mean of the three) less that part's smooth part (a box
-/// blur a quarter of the face wide).
-fn mottling_terms(input: &RgbImage, output: &RgbImage, face: Region) -> Vec<(usize, f64)> {
-    let (w, h) = (input.width, input.height);
-    let channel_gain = |c: usize| log_ratio(input, output, |p| p[c] as f64 / 255.0);
+/// Per pixel of `face` (in frame pixels; its index in the image's pixels):
+/// the squares, summed over the channels, of the colour part of its
+/// per-channel log gain (the channel's less the mean of the three) less that
+/// part's smooth part (a box blur a quarter of the face wide).
+fn mottling_terms(input: &impl Pixels, output: &impl Pixels, face: Region) -> Vec<(usize, f64)> {
+    let (w, h) = input.size();
+    let face = in_pixels_of(face, input);
+    let channel_gain = |c: usize| log_ratio(input, output, |p| p[c]);
     let gains = [channel_gain(0), channel_gain(1), channel_gain(2)];
     let radius = (face.size / 8).max(1);
     let pixels: Vec<usize> = (face.y..(face.y + face.size).min(h))
@@ -254,17 +430,18 @@ fn mottling_terms(input: &RgbImage, output: &RgbImage, face: Region) -> Vec<(usi
 /// A change of the input's face-region mean, in levels, that counts as a cut.
 const CUT_LEVELS: f64 = 8.0;
 
-/// Mean over `face` of all three channels, in 8-bit levels.
-pub fn mean_level(img: &RgbImage, face: Region) -> f64 {
-    let w = img.width;
-    let mut sum = 0.0;
-    let mut count = 0usize;
-    for y in face.y..(face.y + face.size).min(img.height) {
-        let row = 3 * (y * w + face.x)..3 * (y * w + (face.x + face.size).min(w));
-        sum += img.data[row.clone()].iter().map(|&v| v as f64).sum::<f64>();
-        count += row.len();
+/// Mean over `face` (in frame pixels) of all three channels, in 8-bit levels.
+pub fn mean_level(img: &impl Pixels, face: Region) -> f64 {
+    let (w, h) = img.size();
+    let face = in_pixels_of(face, img);
+    let (mut sum, mut count) = (0.0, 0usize);
+    for y in face.y..(face.y + face.size).min(h) {
+        for x in face.x..(face.x + face.size).min(w) {
+            sum += img.rgb(x, y).iter().sum::<f64>();
+            count += 3;
+        }
     }
-    sum / count.max(1) as f64
+    255.0 * sum / count.max(1) as f64
 }
 
 /// The 95th percentile of the frame-to-frame change of the output's face-region
@@ -360,6 +537,42 @@ mod tests {
         let bands = mottling_by_luma(&input, &blotched, face, &[16.0, 64.0, 200.0]);
         assert_eq!(bands.len(), 4);
         assert_eq!(bands[2], (1.0, 1.0));
+    }
+
+    #[test]
+    fn i420_is_read_as_it_carries_light_and_colour() {
+        use gstlsydrelight::frame::{OwnedFrame, YuvMatrix};
+        // A 4 x 2 I420 frame: a dark pixel beside three bright ones in the
+        // first chroma sample, whose colour is a saturated red; grey beside it.
+        let mut frame = OwnedFrame::new(
+            PixelFormat::I420,
+            (4, 2),
+            0,
+            YuvMatrix::BT601_LIMITED,
+            || 128,
+        );
+        frame.planes[0].0 = vec![20, 200, 120, 120, 200, 200, 120, 120];
+        frame.planes[1].0 = vec![100, 128];
+        frame.planes[2].0 = vec![200, 128];
+        let f = frame.frame();
+        // Pixel by pixel the dark one's green and blue fall below black and clip.
+        let dark = View::pixels(f).rgb(0, 0);
+        assert!(dark[1] == 0.0 && dark[2] == 0.0, "{dark:?}");
+        // Its chroma sample is read as one pixel: the mean luma of the four
+        // with their colour, which no channel clips.
+        let colour = View::colour(f);
+        assert_eq!((colour.size(), colour.step()), ((2, 1), 2));
+        let sample = colour.rgb(0, 0);
+        let expected = YuvMatrix::BT601_LIMITED.to_rgb(155.0, 100.0, 200.0);
+        for c in 0..3 {
+            assert!(sample[c] > 0.0 && (sample[c] - expected[c] as f64).abs() < 1e-6);
+        }
+        // Brightness is the luma plane, as grey: (120 - 16) / 219.
+        let grey = View::brightness(f).rgb(2, 1);
+        assert!(
+            grey.iter().all(|&v| (v - 104.0 / 219.0).abs() < 1e-6),
+            "{grey:?}"
+        );
     }
 
     #[test]
