@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
-//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 2] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
@@ -529,13 +529,13 @@ const MAXINE_720P_MS: [(&str, f64); 3] = [("T4", 54.0), ("A40", 17.1), ("L40", 8
 
 /// Where the time goes at each size and format, every frame through the network,
 /// in `rounds` interleaved rounds; a markdown table of medians and min-max.
-fn stages(rounds: usize, only: &[String]) -> Result<String, String> {
+fn stages(rounds: usize, only: &[String], threads: u32) -> Result<String, String> {
     let default = checkout().join("models/default");
     let every_frame = Variant {
         name: "default, every frame".into(),
         group: "stages".into(),
         model: default,
-        threads: 2,
+        threads,
         properties: vec![("reuse-interval".into(), "1".into())],
         recordings: vec![],
         latency_sizes: vec![],
@@ -566,8 +566,8 @@ fn stages(rounds: usize, only: &[String]) -> Result<String, String> {
         .collect();
     let mut out = vec![
         format!(
-            "Per frame, every frame through the network, one frame in flight, 2 threads; \
-             median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
+            "Per frame, every frame through the network, one frame in flight, network on \
+             {threads} thread(s); median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
              on this 2-core CPU. Published anchor, not measured here: NVIDIA Maxine video \
              relighting at 720p, {}.",
             anchors.join(", ")
@@ -966,7 +966,9 @@ fn main() -> Result<(), String> {
         let only: Vec<String> = flag("--only")
             .map(|o| o.split(',').map(str::to_string).collect())
             .unwrap_or_default();
-        let table = stages(rounds, &only)?;
+        let threads =
+            flag("--threads").map_or(Ok(2), |t| t.parse().map_err(|_| "bad --threads"))?;
+        let table = stages(rounds, &only, threads)?;
         let path = out.join("stages.md");
         std::fs::write(&path, &table).map_err(|e| e.to_string())?;
         print!("{table}");

@@ -294,6 +294,31 @@ pub struct FrameMut<'a> {
     pub matrix: YuvMatrix,
 }
 
+/// A copy of a frame's bytes, to put back: work done on a frame before the
+/// decision to leave it as it was (the denoising, run while the network
+/// decides) must then be undone. Kept from frame to frame to spare its
+/// allocation.
+#[derive(Default)]
+pub struct FrameCopy(Vec<u8>);
+
+impl FrameCopy {
+    pub fn save(&mut self, frame: &FrameMut) {
+        self.0.clear();
+        for (data, _) in &frame.planes {
+            self.0.extend_from_slice(data);
+        }
+    }
+
+    /// Puts back the bytes of the frame last saved; `frame` must be that one.
+    pub fn restore(&self, frame: &mut FrameMut) {
+        let mut at = 0;
+        for (data, _) in frame.planes.iter_mut() {
+            data.copy_from_slice(&self.0[at..at + data.len()]);
+            at += data.len();
+        }
+    }
+}
+
 /// The square the network sees, in pixels of the frame.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Crop {

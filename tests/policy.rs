@@ -7,7 +7,7 @@ use gstlsydrelight::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Reuse, Skips,
     Source, Temporal,
 };
-use gstlsydrelight::frame::{Crop, Frame};
+use gstlsydrelight::frame::{Crop, Frame, FrameMut, LightingChange, PixelFormat, YuvMatrix};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{
@@ -61,23 +61,29 @@ fn run_faded(
             want_prediction: false,
         })
         .unwrap();
-    let pasted = outcome.change.map(|change| {
-        let mut out = image.data.clone();
-        let mut fm = gstlsydrelight::frame::FrameMut {
-            format: frame.format,
-            width: w,
-            height: h,
-            planes: [
-                (&mut out[..], w * 3),
-                (Default::default(), 0),
-                (Default::default(), 0),
-            ],
-            matrix: frame.matrix,
-        };
-        change.apply_faded(&mut fm, crop, 0, outcome.strength);
-        out
-    });
+    let pasted = outcome
+        .change
+        .map(|change| paste(image, crop, change, outcome.strength));
     (outcome.action, pasted)
+}
+
+/// `change` pasted onto a copy of `image` round `crop`, as bytes.
+fn paste(image: &RgbImage, crop: Crop, change: &LightingChange, strength: f32) -> Vec<u8> {
+    let (w, h) = (image.width, image.height);
+    let mut out = image.data.clone();
+    let mut fm = FrameMut {
+        format: PixelFormat::Rgb,
+        width: w,
+        height: h,
+        planes: [
+            (&mut out[..], w * 3),
+            (Default::default(), 0),
+            (Default::default(), 0),
+        ],
+        matrix: YuvMatrix::BT601_LIMITED,
+    };
+    change.apply_faded(&mut fm, crop, 0, strength);
+    out
 }
 
 fn solid(like: &RgbImage, level: u8) -> RgbImage {
@@ -257,4 +263,44 @@ fn without_a_face_the_frame_passes_and_a_fading_face_is_shown_in_part() {
         (0.35..0.65).contains(&share),
         "half faded in moves {share} as far"
     );
+}
+
+#[test]
+fn the_network_gives_the_same_beside_other_work_on_the_frame() {
+    // The element denoises the frame on another thread while the network
+    // runs: prepare, then finish_while, must relight as process does.
+    let face = face_rgb();
+    let (w, h) = (face.width, face.height);
+    let frame = Frame::packed_rgb(&face.data, w, h);
+    let crop = Crop::centred(w, h, 0.5, 0.5, 1.0);
+    let request = || FrameRequest {
+        frame: &frame,
+        crop,
+        strength: 1.0,
+        source: white_monitor(),
+        late: false,
+        want_prediction: false,
+    };
+    let every_frame = Skips {
+        reuse_interval: 1,
+        ..Skips::default()
+    };
+    let (mut alone, mut beside) = (policy(every_frame), policy(every_frame));
+    for _ in 0..3 {
+        let expected = alone.process(request()).unwrap();
+        let engine::Prepared::Relight(pending) = beside.prepare(request()).unwrap() else {
+            panic!("every frame runs the network at reuse interval 1");
+        };
+        let here = std::thread::current().id();
+        let (outcome, elsewhere, _) =
+            beside.finish_while(pending, || std::thread::current().id() != here);
+        let outcome = outcome.unwrap();
+        assert!(elsewhere, "the other work runs on another thread");
+        assert_eq!(outcome.action, Action::Relit);
+        let pasted = |change| paste(face, crop, change, 1.0);
+        assert!(
+            pasted(outcome.change.unwrap()) == pasted(expected.change.unwrap()),
+            "the same change"
+        );
+    }
 }

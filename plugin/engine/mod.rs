@@ -10,8 +10,8 @@ pub mod temporal;
 
 pub use contract::{ContractError, CropSpec, Manifest};
 pub use policy::{
-    Action, FrameOutput, FramePolicy, FrameRequest, Outcome, PassThrough, PolicyCounts, Reuse,
-    Skips, Source,
+    Action, FrameOutput, FramePolicy, FrameRequest, Outcome, PassThrough, Pending, PolicyCounts,
+    Prepared, Reuse, Skips, Source,
 };
 pub use relighter::Relighter;
 pub use runtime::{EngineError, Provider, environment};

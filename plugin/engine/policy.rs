@@ -19,6 +19,7 @@
 //! No GStreamer here: the element wires frames to it.
 
 use std::fmt;
+use std::time::Instant;
 
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
@@ -219,6 +220,29 @@ pub struct PolicyCounts {
     pub change_seconds: f64,
 }
 
+/// What [`FramePolicy::prepare`] decided for a frame.
+pub enum Prepared {
+    /// Passed through, or the last change carried, with no network: the
+    /// outcome, whose change [`FramePolicy::decided`] fills in.
+    Decided(Outcome<'static>),
+    /// The network is to run ([`FramePolicy::finish`]).
+    Relight(Pending),
+}
+
+/// A frame's network input and what the policy decided about it so far:
+/// what [`FramePolicy::finish`] needs, with no borrow of the frame.
+pub struct Pending {
+    image: Vec<f32>,
+    crop: Crop,
+    strength: f32,
+    source: Source,
+    want_prediction: bool,
+    average: Option<Light>,
+    luma: f32,
+    presence: Option<f32>,
+    change_since_network: f32,
+}
+
 /// What a relit frame leaves for the frames that reuse it.
 struct Processed {
     /// The network's input, and the averaged source light.
@@ -343,6 +367,18 @@ impl FramePolicy {
     /// Decides what happens to one frame and does it, but for pasting the
     /// returned change onto the frame.
     pub fn process(&mut self, request: FrameRequest) -> Result<Outcome<'_>, EngineError> {
+        match self.prepare(request)? {
+            Prepared::Decided(decided) => Ok(self.decided(decided)),
+            Prepared::Relight(pending) => self.finish(pending),
+        }
+    }
+
+    /// The first half of [`FramePolicy::process`]: reads the frame and
+    /// decides, without the network, whether it passes through or carries
+    /// the last change; or what the network is to run on, which holds nothing
+    /// of the frame, so the frame can be written while the network runs
+    /// ([`FramePolicy::finish`]).
+    pub fn prepare(&mut self, request: FrameRequest) -> Result<Prepared, EngineError> {
         let FrameRequest {
             frame,
             crop,
@@ -355,7 +391,7 @@ impl FramePolicy {
             // Nobody to relight; by the time a face is back, nothing from before applies.
             self.counts.passed_no_face += 1;
             self.reset();
-            return Ok(Outcome {
+            return Ok(Prepared::Decided(Outcome {
                 action: Action::PassedThrough(PassThrough::NoFace),
                 change: None,
                 strength,
@@ -363,7 +399,7 @@ impl FramePolicy {
                 luma: 0.0,
                 presence: None,
                 change_since_network: 0.0,
-            });
+            }));
         }
         let res = self.relighter.resolution();
         let image = timed(&mut self.counts.crop_seconds, || {
@@ -384,7 +420,7 @@ impl FramePolicy {
             // light again: nothing from before carries over.
             self.counts.passed_dark += 1;
             self.reset();
-            return Ok(passed(PassThrough::Dark, None));
+            return Ok(Prepared::Decided(passed(PassThrough::Dark, None)));
         }
         let mut presence = None;
         if self.skips.skip_absent && self.relighter.has_presence() {
@@ -395,7 +431,7 @@ impl FramePolicy {
             if presence.is_some_and(|p| p < self.skips.presence_threshold) {
                 self.counts.passed_absent += 1;
                 self.reset();
-                return Ok(passed(PassThrough::Absent, presence));
+                return Ok(Prepared::Decided(passed(PassThrough::Absent, presence)));
             }
         }
         let average = self.peek_average(&source);
@@ -408,10 +444,10 @@ impl FramePolicy {
         {
             self.counts.passed_same_light += 1;
             self.skip_frame(&source);
-            return Ok(Outcome {
+            return Ok(Prepared::Decided(Outcome {
                 predicted: self.last.as_ref().and_then(|l| l.predicted.clone()),
                 ..passed(PassThrough::SameLight, presence)
-            });
+            }));
         }
         let last = self.last.as_ref().filter(|last| last.crop.near(crop));
         let change_since_network = last.map_or(f32::INFINITY, |l| mean_abs_diff(&image, &l.image));
@@ -435,24 +471,95 @@ impl FramePolicy {
             self.skip_frame(&source);
             let last = self.last.as_mut().expect("reuse needs a relit frame");
             last.carried += 1;
-            // The last lighting change, carried onto this frame as it is: a smooth
-            // gain of the frame's own pixels, so it follows the frame's detail and
-            // costs nothing to carry (building a new one costs more than the paste).
-            return Ok(Outcome {
+            // The last lighting change, carried onto this frame as it is
+            // ([`FramePolicy::decided`]): a smooth gain of the frame's own
+            // pixels, so it follows the frame's detail and costs nothing to
+            // carry (building a new one costs more than the paste).
+            return Ok(Prepared::Decided(Outcome {
                 action: Action::Reused(why),
-                change: Some(&last.change),
+                change: None,
                 strength,
                 predicted: last.predicted.clone(),
                 luma,
                 presence,
                 change_since_network,
-            });
+            }));
         }
+        Ok(Prepared::Relight(Pending {
+            image,
+            crop,
+            strength,
+            source,
+            want_prediction,
+            average,
+            luma,
+            presence,
+            change_since_network,
+        }))
+    }
+
+    /// A decision of [`FramePolicy::prepare`] as an outcome: a frame that
+    /// carries the last change gets it.
+    pub fn decided(&self, decided: Outcome<'static>) -> Outcome<'_> {
+        let carried = matches!(decided.action, Action::Reused(_));
+        Outcome {
+            change: carried.then(|| {
+                &self
+                    .last
+                    .as_ref()
+                    .expect("reuse needs a relit frame")
+                    .change
+            }),
+            ..decided
+        }
+    }
+
+    /// [`FramePolicy::finish`], with `meanwhile` run on another thread while
+    /// the network runs on this one: work on the frame that does not need
+    /// the network's result (the denoising), which the other core does
+    /// instead of waiting. Returns the outcome, what `meanwhile` returned and
+    /// the seconds this thread then waited for it.
+    pub fn finish_while<T: Send>(
+        &mut self,
+        pending: Pending,
+        meanwhile: impl FnOnce() -> T + Send,
+    ) -> (Result<Outcome<'_>, EngineError>, T, f64) {
+        std::thread::scope(|scope| {
+            let other = scope.spawn(meanwhile);
+            let outcome = self.finish(pending);
+            let waiting = Instant::now();
+            match other.join() {
+                Ok(done) => (outcome, done, waiting.elapsed().as_secs_f64()),
+                Err(panic) => std::panic::resume_unwind(panic),
+            }
+        })
+    }
+
+    /// The second half of [`FramePolicy::process`]: runs the network on what
+    /// [`FramePolicy::prepare`] read, and builds the lighting change.
+    pub fn finish(&mut self, pending: Pending) -> Result<Outcome<'_>, EngineError> {
+        let Pending {
+            image,
+            crop,
+            strength,
+            source,
+            want_prediction,
+            average,
+            luma,
+            presence,
+            change_since_network,
+        } = pending;
+        let res = self.relighter.resolution();
         let out = self.relight(&image, source, want_prediction)?;
         let Some(relit) = out.relit else {
             return Ok(Outcome {
+                action: Action::PassedThrough(PassThrough::NonFinite),
+                change: None,
+                strength,
                 predicted: out.predicted,
-                ..passed(PassThrough::NonFinite, presence)
+                luma,
+                presence,
+                change_since_network: 0.0,
             });
         };
         self.counts.relit += 1;

@@ -144,6 +144,8 @@ pub struct DetailDenoiser {
     /// One per channel, in the order the format's passes walk them.
     channels: Vec<ChannelState>,
     scratch: Scratch,
+    /// The scratch of the other thread, which filters the planes after the first.
+    beside: Scratch,
 }
 
 impl DetailDenoiser {
@@ -165,26 +167,62 @@ impl DetailDenoiser {
             self.stream = stream;
         }
         let disc = Disc::new(crop, feather, strength);
-        let mut k = 0;
-        for pass in frame.format.passes() {
-            let (data, stride) = (&mut *frame.planes[pass.plane].0, frame.planes[pass.plane].1);
-            let sub = pass.subsample;
-            let plane = PlaneView {
-                size: (frame.width.div_ceil(sub), frame.height.div_ceil(sub)),
-                stride,
-                bytes: pass.lanes.len(),
-                subsample: sub,
-            };
-            for (lane, channel) in pass.lanes.iter().enumerate() {
-                if channel.is_none() {
-                    continue;
-                }
-                if self.channels.len() <= k {
-                    self.channels.push(ChannelState::default());
-                }
-                self.channels[k].filter(data, &plane, lane, &disc, &mut self.scratch);
-                k += 1;
+        let passes = frame.format.passes();
+        let count = passes
+            .iter()
+            .flat_map(|pass| pass.lanes.iter().flatten())
+            .count();
+        self.channels.resize_with(count, ChannelState::default);
+        // Each pass walks a plane of its own; the planes' channels are
+        // independent, so the first plane (luma, of a YUV frame) is filtered
+        // on another thread while this one filters the rest.
+        let mut planes = frame.planes.iter_mut().map(Some).collect::<Vec<_>>();
+        let mut channels = self.channels.iter_mut();
+        let mut work: Vec<PlaneWork> = passes
+            .iter()
+            .map(|pass| {
+                let (data, stride) = planes[pass.plane].take().expect("a plane a pass");
+                let sub = pass.subsample;
+                let plane = PlaneView {
+                    size: (frame.width.div_ceil(sub), frame.height.div_ceil(sub)),
+                    stride: *stride,
+                    bytes: pass.lanes.len(),
+                    subsample: sub,
+                };
+                let lanes = (0..pass.lanes.len())
+                    .filter(|&lane| pass.lanes[lane].is_some())
+                    .map(|lane| (lane, channels.next().expect("counted above")))
+                    .collect();
+                PlaneWork { data, plane, lanes }
+            })
+            .collect();
+        let rest = work.split_off(1);
+        let first = work.pop().expect("every format has a plane");
+        let (scratch, beside) = (&mut self.scratch, &mut self.beside);
+        if rest.is_empty() {
+            return first.filter(&disc, scratch);
+        }
+        std::thread::scope(|scope| {
+            scope.spawn(|| first.filter(&disc, beside));
+            for work in rest {
+                work.filter(&disc, scratch);
             }
+        });
+    }
+}
+
+/// One plane to filter, and its channels with their state.
+struct PlaneWork<'a> {
+    data: &'a mut [u8],
+    plane: PlaneView,
+    /// Per channel, its byte in a sample.
+    lanes: Vec<(usize, &'a mut ChannelState)>,
+}
+
+impl PlaneWork<'_> {
+    fn filter(self, disc: &Disc, scratch: &mut Scratch) {
+        for (lane, channel) in self.lanes {
+            channel.filter(self.data, &self.plane, lane, disc, scratch);
         }
     }
 }

@@ -31,9 +31,9 @@ use super::video::{
     with_frame_mut,
 };
 use crate::engine::{
-    self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Source,
+    self, Action, FramePolicy, FrameRequest, PassThrough, Prepared, Provider, Relighter, Source,
 };
-use crate::frame::DetailDenoiser;
+use crate::frame::{DetailDenoiser, FrameCopy, FrameMut};
 use crate::light::Light;
 use crate::targets::Crossfade;
 
@@ -66,6 +66,8 @@ struct State {
     nan_warned: bool,
     /// The camera's noise taken out of the face's detail (`denoise`).
     denoiser: DetailDenoiser,
+    /// The frame's bytes as they came, while it is denoised beside the network.
+    undenoised: FrameCopy,
 }
 
 pub struct LsydRelight {
@@ -461,7 +463,7 @@ impl LsydRelight {
         let show_prediction = self.monitor_src.is_linked();
         let want_prediction = show_prediction || settings.match_check;
         let time = running_time(&self.face_pad, buffer.pts()).map_or(0.0, |t| t.seconds_f64());
-        let (region, outcome, setup_seconds, policy_seconds) = {
+        let (region, prepared, setup_seconds, prepare_seconds) = {
             let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), &info)
                 .map_err(|_| gst::FlowError::Error)?;
             let view = frame_view(&frame).ok_or(gst::FlowError::NotNegotiated)?;
@@ -482,9 +484,9 @@ impl LsydRelight {
                 );
             }
             laps.lap();
-            let outcome = state
+            let prepared = state
                 .policy
-                .process(FrameRequest {
+                .prepare(FrameRequest {
                     frame: &view,
                     crop: region.crop,
                     strength: region.strength,
@@ -493,37 +495,102 @@ impl LsydRelight {
                     want_prediction,
                 })
                 .map_err(|e| self.engine_failed(e))?;
-            (region, outcome, setup_seconds, laps.lap())
+            (region, prepared, setup_seconds, laps.lap())
         };
         let crop = region.crop;
         let feather = (settings.feather * crop.size as f64).round() as usize;
+        let State {
+            policy,
+            denoiser,
+            undenoised,
+            ..
+        } = state;
+        // Seconds the frame waited for the denoising and pasting; the
+        // denoising's own; with the network, seconds in the policy.
+        let (mut paste_seconds, mut denoise_seconds, mut finish_seconds) = (0.0, 0.0, 0.0);
+        let strength = region.strength;
+        let mut denoise = |fm: &mut FrameMut| {
+            let denoising = Instant::now();
+            if settings.denoise {
+                denoiser.apply(fm, crop, feather, strength);
+            }
+            denoising.elapsed().as_secs_f64()
+        };
+        let outcome = match prepared {
+            Prepared::Decided(decided) => {
+                let outcome = policy.decided(decided);
+                if let Some(change) = outcome.change {
+                    let mut frame = gst_video::VideoFrameRef::from_buffer_ref_writable(
+                        buffer.make_mut(),
+                        &info,
+                    )
+                    .map_err(|_| gst::FlowError::Error)?;
+                    with_frame_mut(&mut frame, |fm| {
+                        denoise_seconds = denoise(fm);
+                        paste_seconds += denoise_seconds;
+                        let pasting = Instant::now();
+                        change.apply_faded(fm, crop, feather, outcome.strength);
+                        paste_seconds += pasting.elapsed().as_secs_f64();
+                    })
+                    .ok_or(gst::FlowError::NotNegotiated)?;
+                }
+                outcome
+            }
+            Prepared::Relight(pending) => {
+                let mut frame =
+                    gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
+                        .map_err(|_| gst::FlowError::Error)?;
+                with_frame_mut(&mut frame, |fm| {
+                    let finishing = Instant::now();
+                    // The denoising needs the frame and the crop alone: it runs
+                    // on the other core while the network runs on this one.
+                    let outcome = if settings.denoise {
+                        undenoised.save(fm);
+                        let (outcome, denoising, waited) =
+                            policy.finish_while(pending, || denoise(fm));
+                        (denoise_seconds, paste_seconds) = (denoising, waited);
+                        finish_seconds -= waited;
+                        let outcome = outcome?;
+                        if outcome.change.is_none() {
+                            gst::debug!(
+                                CAT,
+                                imp = self,
+                                "undoing the denoising: no change to paste"
+                            );
+                            undenoised.restore(fm);
+                        }
+                        outcome
+                    } else {
+                        policy.finish(pending)?
+                    };
+                    finish_seconds += finishing.elapsed().as_secs_f64();
+                    if let Some(change) = outcome.change {
+                        let pasting = Instant::now();
+                        change.apply_faded(fm, crop, feather, outcome.strength);
+                        paste_seconds += pasting.elapsed().as_secs_f64();
+                    }
+                    Ok(outcome)
+                })
+                .ok_or(gst::FlowError::NotNegotiated)?
+                .map_err(|e| self.engine_failed(e))?
+            }
+        };
+        let policy_seconds = prepare_seconds + finish_seconds;
         gst::debug!(
             CAT,
             imp = self,
             "frame at {}: {outcome}",
             buffer.pts().display()
         );
-        if let Some(change) = outcome.change {
-            let pasting = Instant::now();
-            let mut frame =
-                gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
-                    .map_err(|_| gst::FlowError::Error)?;
-            let denoiser = settings.denoise.then_some(&mut state.denoiser);
-            with_frame_mut(&mut frame, |fm| {
-                if let Some(denoiser) = denoiser {
-                    denoiser.apply(fm, crop, feather, outcome.strength);
-                }
-                change.apply_faded(fm, crop, feather, outcome.strength)
-            })
-            .ok_or(gst::FlowError::NotNegotiated)?;
-            let paste_seconds = pasting.elapsed().as_secs_f64();
-            self.count(|st| st.paste_seconds += paste_seconds);
-        }
+        self.count(|st| {
+            st.paste_seconds += paste_seconds;
+            st.denoise_seconds += denoise_seconds;
+        });
         laps.lap();
         let outcome_shows_face = outcome.change.is_some();
         let shown_strength = outcome.strength;
         // The next denoised frame must not be filtered against one that was not.
-        if (!outcome_shows_face || !settings.denoise) && state.denoiser.reset() {
+        if (!outcome_shows_face || !settings.denoise) && denoiser.reset() {
             gst::debug!(
                 CAT,
                 imp = self,
@@ -542,7 +609,7 @@ impl LsydRelight {
             }
             _ => false,
         };
-        let policy_counts = state.policy.counts();
+        let policy_counts = policy.counts();
         let follow_counts = state.region.counts();
         drop(guard);
         if outcome_shows_face {
@@ -1041,6 +1108,7 @@ impl AggregatorImpl for LsydRelight {
             fade,
             nan_warned: false,
             denoiser: DetailDenoiser::default(),
+            undenoised: FrameCopy::default(),
         });
         *lock(&self.stats) = Stats::default();
         lock(&self.monitor).restart();

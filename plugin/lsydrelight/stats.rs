@@ -9,9 +9,12 @@ use crate::engine::PolicyCounts;
 #[derive(Debug, Default, Clone, Copy)]
 pub struct Stats {
     pub frames: u64,
-    /// Seconds spent on face frames in all, and pasting the lighting change back.
+    /// Seconds spent on face frames in all, and pasting the lighting change
+    /// back, with the denoising the frame waited for.
     pub processing_seconds: f64,
     pub paste_seconds: f64,
+    /// Seconds denoising (`denoise`), beside the network on frames it relit.
+    pub denoise_seconds: f64,
     /// Seconds spent turning monitor frames into lights.
     pub monitor_light_seconds: f64,
     pub known_source: u64,
@@ -99,6 +102,7 @@ impl Stats {
             .field("network-seconds", p.network_seconds)
             .field("crop-seconds", p.crop_seconds)
             .field("paste-seconds", self.paste_seconds)
+            .field("denoise-seconds", self.denoise_seconds)
             .field("smoothing-seconds", p.filter_seconds)
             .field("change-seconds", p.change_seconds)
             .field("decide-seconds", decide.max(0.0))
