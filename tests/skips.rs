@@ -192,6 +192,11 @@ fn late_frames_reuse_the_relighting_and_say_so() {
     let bus = gst::Bus::new();
     e.set_bus(Some(&bus));
     push(&mut h, &c, face_rgb(), 0);
+    let denoised = e
+        .property::<gst::Structure>("stats")
+        .get::<f64>("denoise-seconds")
+        .unwrap();
+    assert!(denoised > 0.0, "the relit frame is denoised");
     // Downstream reports being a second behind: frames before then are too late to matter.
     let qos = gst::event::Qos::new(
         gst::QOSType::Underflow,
@@ -210,6 +215,13 @@ fn late_frames_reuse_the_relighting_and_say_so() {
         "late frames reuse the last relighting"
     );
     assert_eq!(stat(&e, "relit"), 1);
+    assert_eq!(
+        e.property::<gst::Structure>("stats")
+            .get::<f64>("denoise-seconds")
+            .unwrap(),
+        denoised,
+        "late frames skip the denoising, to catch up"
+    );
     let qos_messages = std::iter::from_fn(|| bus.pop_filtered(&[gst::MessageType::Qos])).count();
     assert_eq!(
         qos_messages, 3,

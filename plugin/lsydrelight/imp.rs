@@ -31,7 +31,8 @@ use super::video::{
     with_frame_mut,
 };
 use crate::engine::{
-    self, Action, FramePolicy, FrameRequest, PassThrough, Prepared, Provider, Relighter, Source,
+    self, Action, FramePolicy, FrameRequest, PassThrough, Prepared, Provider, Relighter, Reuse,
+    Source,
 };
 use crate::frame::{DetailDenoiser, FrameCopy, FrameMut};
 use crate::light::Light;
@@ -525,9 +526,16 @@ impl LsydRelight {
                         &info,
                     )
                     .map_err(|_| gst::FlowError::Error)?;
+                    // A late frame is to catch up: it costs the paste alone.
+                    let late = outcome.action == Action::Reused(Reuse::Late);
+                    if late && settings.denoise {
+                        gst::debug!(CAT, imp = self, "late: not denoised, to catch up");
+                    }
                     with_frame_mut(&mut frame, |fm| {
-                        denoise_seconds = denoise(fm);
-                        paste_seconds += denoise_seconds;
+                        if !late {
+                            denoise_seconds = denoise(fm);
+                            paste_seconds += denoise_seconds;
+                        }
                         let pasting = Instant::now();
                         change.apply_faded(fm, crop, feather, outcome.strength);
                         paste_seconds += pasting.elapsed().as_secs_f64();
