@@ -294,6 +294,37 @@ pub struct FrameMut<'a> {
     pub matrix: YuvMatrix,
 }
 
+impl FrameMut<'_> {
+    /// The frame's rows before frame row `row` and from it on, each a view
+    /// whose planes start at its own first row; size, format and matrix stay
+    /// the frame's. `row` is even, so chroma rows go with their luma rows.
+    pub(crate) fn split_rows(&mut self, row: usize) -> [FrameMut<'_>; 2] {
+        assert!(row.is_multiple_of(2), "frames split at even rows");
+        let mut subsample = [1; 3];
+        for pass in self.format.passes() {
+            subsample[pass.plane] = pass.subsample;
+        }
+        let mut halves = self
+            .planes
+            .iter_mut()
+            .zip(subsample)
+            .map(|((data, stride), sub)| {
+                let (top, bottom) = data.split_at_mut((row / sub * *stride).min(data.len()));
+                ((top, *stride), (bottom, *stride))
+            });
+        let mut next = || halves.next().expect("three planes");
+        let [(t0, b0), (t1, b1), (t2, b2)] = [next(), next(), next()];
+        let view = |planes| FrameMut {
+            format: self.format,
+            width: self.width,
+            height: self.height,
+            planes,
+            matrix: self.matrix,
+        };
+        [view([t0, t1, t2]), view([b0, b1, b2])]
+    }
+}
+
 /// A copy of a frame's bytes, to put back: work done on a frame before the
 /// decision to leave it as it was (the denoising, run while the network
 /// decides) must then be undone. Kept from frame to frame to spare its

@@ -177,27 +177,47 @@ impl GainField {
     /// samples, their pixels' mean luma and their Cb and Cr, read before any
     /// of them change; the new Cb and Cr; then its luma rows, each pixel with
     /// its own `ḡ` and its chroma sample's colour term.
-    pub(super) fn paste_yuv(&self, yuv: &YuvChange, luma_gain: &[f32], frame: &mut FrameMut) {
+    ///
+    /// Only frame rows `rows` (`rows.start` even), where `frame`'s planes start.
+    pub(super) fn paste_yuv(
+        &self,
+        yuv: &YuvChange,
+        luma_gain: &[f32],
+        frame: &mut FrameMut,
+        rows: Range<usize>,
+    ) {
         // AVX2, where the CPU has it, doubles the vectors' width of the loops
         // over a row, with the same results (see `gain_row`).
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.paste_yuv_avx2(yuv, luma_gain, frame) };
+            return unsafe { self.paste_yuv_avx2(yuv, luma_gain, frame, rows) };
         }
-        self.paste_yuv_portable(yuv, luma_gain, frame)
+        self.paste_yuv_portable(yuv, luma_gain, frame, rows)
     }
 
     /// `paste_yuv_portable` built for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn paste_yuv_avx2(&self, yuv: &YuvChange, luma_gain: &[f32], frame: &mut FrameMut) {
-        self.paste_yuv_portable(yuv, luma_gain, frame)
+    fn paste_yuv_avx2(
+        &self,
+        yuv: &YuvChange,
+        luma_gain: &[f32],
+        frame: &mut FrameMut,
+        rows: Range<usize>,
+    ) {
+        self.paste_yuv_portable(yuv, luma_gain, frame, rows)
     }
 
     // Always inlined, so that `paste_yuv_avx2` holds a copy built for AVX2.
     #[inline(always)]
-    fn paste_yuv_portable(&self, yuv: &YuvChange, luma_gain: &[f32], frame: &mut FrameMut) {
+    fn paste_yuv_portable(
+        &self,
+        yuv: &YuvChange,
+        luma_gain: &[f32],
+        frame: &mut FrameMut,
+        rows: Range<usize>,
+    ) {
         let (width, height) = (frame.width, frame.height);
         let [
             (cb_plane, sub, cb_step, cb_byte),
@@ -210,8 +230,12 @@ impl GainField {
             self.taps(chroma_height, sub, 1),
         );
         let luma_rows = |cy: usize| sub * cy..(sub * cy + sub).min(height);
+        let chroma_rows = rows.start / sub..rows.end.div_ceil(sub).min(chroma_height);
+        // Planes' rows from the first of `rows`.
+        let (luma_row, chroma_row) = (|y: usize| y - rows.start, |cy| cy - chroma_rows.start);
         // Per chroma row, the chroma columns it or its luma rows change.
-        let spans: Vec<Option<(usize, usize)>> = (0..chroma_height)
+        let spans: Vec<Option<(usize, usize)>> = chroma_rows
+            .clone()
             .map(|cy| {
                 let luma = luma_rows(cy)
                     .filter_map(|y| self.changed_columns(&luma_x, luma_y[y].0))
@@ -246,7 +270,7 @@ impl GainField {
         let (mut cb, mut cr, mut extra) = (vec![0f32; count], vec![0f32; count], vec![0f32; count]);
         // Per pixel of a luma row: its chroma sample's term, dithered.
         let mut luma_extra = vec![0f32; luma_x.len()];
-        for (cy, span) in spans.iter().enumerate() {
+        for (cy, span) in chroma_rows.clone().zip(&spans) {
             let Some((a, b)) = *span else {
                 continue;
             };
@@ -257,7 +281,7 @@ impl GainField {
             let sums = &mut sums[samples.clone()];
             sums.fill(0);
             for y in luma_rows(cy) {
-                let row = &data[y * stride + luma_first..][pixels.clone()];
+                let row = &data[luma_row(y) * stride + luma_first..][pixels.clone()];
                 match sub {
                     1 => add_blocks::<1>(sums, row),
                     _ => add_blocks::<2>(sums, row),
@@ -277,7 +301,8 @@ impl GainField {
                 (&mut cr, (cr_plane, cr_step, cr_byte)),
             ] {
                 let (data, stride) = (&*frame.planes[plane].0, frame.planes[plane].1);
-                let row = &data[cy * stride + a * step..cy * stride + b * step];
+                let start = chroma_row(cy) * stride;
+                let row = &data[start + a * step..start + b * step];
                 let out = &mut out[samples.clone()];
                 match step {
                     1 => read_lane::<1>(out, row, byte),
@@ -303,7 +328,8 @@ impl GainField {
                 (&cr, (cr_plane, cr_step, cr_byte)),
             ] {
                 let (data, stride) = (&mut *frame.planes[plane].0, frame.planes[plane].1);
-                let row = &mut data[cy * stride + a * step..cy * stride + b * step];
+                let start = chroma_row(cy) * stride;
+                let row = &mut data[start + a * step..start + b * step];
                 let values = &values[samples.clone()];
                 match step {
                     1 => write_lane::<1>(row, byte, values),
@@ -326,7 +352,7 @@ impl GainField {
                     self.interpolate_map_row(luma_gain, r, luma_x, out.gain.iter_mut());
                 });
                 let (data, stride) = (&mut *frame.planes[0].0, frame.planes[0].1);
-                let start = y * stride + luma_first;
+                let start = luma_row(y) * stride + luma_first;
                 gain_row(
                     &mut data[start + pixels.start..start + pixels.end],
                     ty,
