@@ -553,9 +553,11 @@ impl LsydRelight {
                     // The denoising needs the frame and the crop alone: it runs
                     // on the other core while the network runs on this one.
                     let outcome = if settings.denoise {
-                        undenoised.save(fm);
-                        let (outcome, denoising, waited) =
-                            policy.finish_while(pending, || denoise(fm));
+                        // The copy to undo it by is made there too.
+                        let (outcome, denoising, waited) = policy.finish_while(pending, || {
+                            undenoised.save(fm);
+                            denoise(fm)
+                        });
                         (denoise_seconds, paste_seconds) = (denoising, waited);
                         finish_seconds -= waited;
                         let outcome = outcome?;
