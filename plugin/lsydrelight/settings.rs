@@ -448,7 +448,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("denoise")
                 .nick("Denoise the face")
-                .blurb("Take the camera's noise out of the detail round the face, over time, before relighting it: still detail is averaged over about 8 frames, moving detail taken as it is; the relit face then flickers less than the camera's picture. false keeps the frame's own detail, noise and all")
+                .blurb("Take the camera's noise out of the detail round the face, over time, before relighting it: still detail is averaged over about 12 frames, moving detail taken as it is; the relit face then flickers less than the camera's picture. It runs beside the network, on the other core; frames late for QoS skip it. false keeps the frame's own detail, noise and all")
                 .default_value(d.denoise)
                 .mutable_playing()
                 .build(),
@@ -512,7 +512,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("qos")
                 .nick("QoS")
-                .blurb("In live pipelines, reuse the last relighting for frames that are already late instead of falling further behind, and post QoS messages")
+                .blurb("In live pipelines, reuse the last relighting, without denoising, for frames that are already late instead of falling further behind, and post QoS messages")
                 .default_value(DEFAULT_QOS)
                 .mutable_playing()
                 .build(),
