@@ -17,6 +17,7 @@ pub mod frame;
 pub mod light;
 pub mod lsydrelight;
 pub mod monitor_match;
+pub mod parallel;
 pub mod paths;
 pub mod targets;
 

@@ -21,6 +21,8 @@
 use std::fmt;
 use std::time::Instant;
 
+use crate::parallel::beside;
+
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
@@ -524,15 +526,9 @@ impl FramePolicy {
         pending: Pending,
         meanwhile: impl FnOnce() -> T + Send,
     ) -> (Result<Outcome<'_>, EngineError>, T, f64) {
-        std::thread::scope(|scope| {
-            let other = scope.spawn(meanwhile);
-            let outcome = self.finish(pending);
-            let waiting = Instant::now();
-            match other.join() {
-                Ok(done) => (outcome, done, waiting.elapsed().as_secs_f64()),
-                Err(panic) => std::panic::resume_unwind(panic),
-            }
-        })
+        let (done, (outcome, finished)) =
+            beside(meanwhile, || (self.finish(pending), Instant::now()));
+        (outcome, done, finished.elapsed().as_secs_f64())
     }
 
     /// The second half of [`FramePolicy::process`]: runs the network on what

@@ -23,6 +23,7 @@
 
 use super::gain_field::{INNER_RADIUS, dither};
 use super::{Crop, FrameMut, PixelFormat, round_to_u8};
+use crate::parallel::beside;
 
 /// Radius, in plane pixels, of the box blur whose rest is the detail that is
 /// filtered over time: 5 × 5 samples, which leave a fifth of the noise in
@@ -144,8 +145,8 @@ pub struct DetailDenoiser {
     /// One per channel, in the order the format's passes walk them.
     channels: Vec<ChannelState>,
     scratch: Scratch,
-    /// The scratch of the other thread, which filters the planes after the first.
-    beside: Scratch,
+    /// The scratch of the other thread, which filters the first plane.
+    second: Scratch,
 }
 
 impl DetailDenoiser {
@@ -198,16 +199,18 @@ impl DetailDenoiser {
             .collect();
         let rest = work.split_off(1);
         let first = work.pop().expect("every format has a plane");
-        let (scratch, beside) = (&mut self.scratch, &mut self.beside);
+        let (scratch, second) = (&mut self.scratch, &mut self.second);
         if rest.is_empty() {
             return first.filter(&disc, scratch);
         }
-        std::thread::scope(|scope| {
-            scope.spawn(|| first.filter(&disc, beside));
-            for work in rest {
-                work.filter(&disc, scratch);
-            }
-        });
+        beside(
+            || first.filter(&disc, second),
+            || {
+                for work in rest {
+                    work.filter(&disc, scratch);
+                }
+            },
+        );
     }
 }
 

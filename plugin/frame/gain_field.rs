@@ -19,6 +19,7 @@ pub(super) mod yuv;
 use std::ops::Range;
 
 use super::{Crop, FrameMut, LightingChange, PixelFormat, YuvMatrix, round_to_u8};
+use crate::parallel::beside;
 use yuv::YuvChange;
 
 /// Grid cells across the crop's side. The change is blurred over nearly half
@@ -164,10 +165,10 @@ impl GainField {
         }
         let split = height / 4 * 2;
         let [mut top, mut bottom] = frame.split_rows(split);
-        std::thread::scope(|scope| {
-            scope.spawn(|| self.paste_rows(&mut bottom, split..height));
-            self.paste_rows(&mut top, 0..split);
-        });
+        beside(
+            || self.paste_rows(&mut bottom, split..height),
+            || self.paste_rows(&mut top, 0..split),
+        );
     }
 
     /// Applies the field to frame rows `rows` (even where it starts) of
