@@ -236,13 +236,11 @@ pub enum Prepared {
 pub struct Pending {
     image: Vec<f32>,
     crop: Crop,
-    strength: f32,
     source: Source,
     want_prediction: bool,
     average: Option<Light>,
-    luma: f32,
-    presence: Option<f32>,
-    change_since_network: f32,
+    /// The outcome as far as it is known: the network's result completes it.
+    so_far: Outcome<'static>,
 }
 
 /// What a relit frame leaves for the frames that reuse it.
@@ -490,13 +488,18 @@ impl FramePolicy {
         Ok(Prepared::Relight(Pending {
             image,
             crop,
-            strength,
             source,
             want_prediction,
             average,
-            luma,
-            presence,
-            change_since_network,
+            so_far: Outcome {
+                action: Action::Relit,
+                change: None,
+                strength,
+                predicted: None,
+                luma,
+                presence,
+                change_since_network,
+            },
         }))
     }
 
@@ -537,25 +540,19 @@ impl FramePolicy {
         let Pending {
             image,
             crop,
-            strength,
             source,
             want_prediction,
             average,
-            luma,
-            presence,
-            change_since_network,
+            so_far,
         } = pending;
         let res = self.relighter.resolution();
         let out = self.relight(&image, source, want_prediction)?;
         let Some(relit) = out.relit else {
             return Ok(Outcome {
                 action: Action::PassedThrough(PassThrough::NonFinite),
-                change: None,
-                strength,
                 predicted: out.predicted,
-                luma,
-                presence,
                 change_since_network: 0.0,
+                ..so_far
             });
         };
         self.counts.relit += 1;
@@ -571,13 +568,9 @@ impl FramePolicy {
             carried: 0,
         });
         Ok(Outcome {
-            action: Action::Relit,
             change: Some(&last.change),
-            strength,
             predicted: out.predicted,
-            luma,
-            presence,
-            change_since_network,
+            ..so_far
         })
     }
 
