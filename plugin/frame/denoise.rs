@@ -137,6 +137,23 @@ enum Walk<'a> {
 /// Rows of the ordered dither's pattern (`gain_field::dither`).
 const DITHER_ROWS: usize = 4;
 
+/// Of the `w` samples of a row from `x0`, subsampled by `sub`: their frame x
+/// coordinates into `xs`, and per row of the dither's pattern their dither.
+fn sample_positions(
+    x0: usize,
+    w: usize,
+    sub: usize,
+    xs: &mut Vec<f32>,
+    dithers: &mut [Vec<f32>; DITHER_ROWS],
+) {
+    xs.clear();
+    xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub as f32));
+    for (r, row) in dithers.iter_mut().enumerate() {
+        row.clear();
+        row.extend((0..w).map(|x| dither(x0 + x, r)));
+    }
+}
+
 /// Temporal denoising of the detail round the face; one per stream.
 #[derive(Default)]
 pub struct DetailDenoiser {
@@ -432,13 +449,7 @@ impl ChannelState {
         // compared with. Without it the frame passes and only teaches it.
         let inverse = per_band(&self.noise).map(|noise| noise.map(|n| 1.0 / n));
         if inverse.is_some() {
-            let sub = plane.subsample as f32;
-            s.xs.clear();
-            s.xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub));
-            for (r, row) in s.dither.iter_mut().enumerate() {
-                row.clear();
-                row.extend((0..w).map(|x| dither(x0 + x, r)));
-            }
+            sample_positions(x0, w, plane.subsample, &mut s.xs, &mut s.dither);
             s.relit.resize(w, 0.0);
             s.weight.resize(w, 0.0);
         }

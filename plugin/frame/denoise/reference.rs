@@ -2,11 +2,10 @@
 //! whole map of the area at a time, as `denoise.rs` first did it. The fast
 //! one must give the same bytes and the same filtered detail.
 
-use super::super::gain_field::dither;
 use super::super::{FrameMut, round_to_u8};
 use super::{
-    BANDS, Disc, MOTION_RADIUS, NO_DETAIL, NOISE_SAMPLES, PlaneView, SPLIT_RADIUS, band, new_share,
-    per_band, restored, stored,
+    BANDS, DITHER_ROWS, Disc, MOTION_RADIUS, NO_DETAIL, NOISE_SAMPLES, PlaneView, SPLIT_RADIUS,
+    band, new_share, per_band, restored, sample_positions, stored,
 };
 
 /// What the plain denoiser keeps of one channel (`ChannelState`).
@@ -33,8 +32,6 @@ struct Scratch {
     relit: Vec<f32>,
     dither: [Vec<f32>; DITHER_ROWS],
 }
-
-const DITHER_ROWS: usize = 4;
 
 /// `DetailDenoiser` written plainly.
 #[derive(Default)]
@@ -172,12 +169,7 @@ impl ReferenceChannel {
         }
         (self.detail.iter_mut().zip(&s.past)).for_each(|(kept, &past)| *kept = stored(past));
         let sub = plane.subsample as f32;
-        s.xs.clear();
-        s.xs.extend((0..w).map(|x| ((x0 + x) as f32 + 0.5) * sub));
-        for (r, row) in s.dither.iter_mut().enumerate() {
-            row.clear();
-            row.extend((0..w).map(|x| dither(x0 + x, r)));
-        }
+        sample_positions(x0, w, plane.subsample, &mut s.xs, &mut s.dither);
         s.weight.resize(w, 0.0);
         s.relit.resize(w, 0.0);
         for y in 0..h {
