@@ -194,7 +194,7 @@ impl DetailDenoiser {
         // Each pass walks a plane of its own; the planes' channels are
         // independent, so the first plane (luma, of a YUV frame) is filtered
         // on another thread while this one filters the rest.
-        let mut planes = frame.planes.iter_mut().map(Some).collect::<Vec<_>>();
+        let mut planes = frame.planes.each_mut().map(Some);
         let mut channels = self.channels.iter_mut();
         let mut work: Vec<PlaneWork> = passes
             .iter()

@@ -90,7 +90,7 @@ impl Format {
     }
 
     /// RGB frames converted into this format, then `element`.
-    fn into(self, element: &str) -> String {
+    fn feeding(self, element: &str) -> String {
         match self {
             Format::Rgb => element.to_string(),
             // No dither: the conversion alone must not make noise the measures would count.
@@ -108,7 +108,7 @@ pub fn through(frames: &[RgbImage], format: Format) -> Result<Vec<OwnedFrame>, S
     if format == Format::Rgb {
         return Ok(frames.iter().map(packed).collect());
     }
-    Ok(run(frames, &format.into("identity"))?
+    Ok(run(frames, &format.feeding("identity"))?
         .into_iter()
         .map(|(frame, _)| frame)
         .collect())
@@ -183,7 +183,7 @@ pub fn relight(
         model.display(),
         target.display()
     );
-    run(frames, &format.into(&element))
+    run(frames, &format.feeding(&element))
 }
 
 /// `frames` (the element's input, from [`through`]) as the element's
