@@ -21,8 +21,10 @@
 //! covers, fading out where the change does, so the noise does not change
 //! level at an edge.
 
+use std::ops::Range;
+
 use super::gain_field::{INNER_RADIUS, dither};
-use super::{Crop, FrameMut, PixelFormat, round_to_u8};
+use super::{Crop, FrameMut, Pass, PixelFormat, round_to_u8};
 use crate::parallel::beside;
 
 /// Radius, in plane pixels, of the box blur whose rest is the detail that is
@@ -82,13 +84,44 @@ struct ChannelState {
     /// noise grows with the light, so dark hair and a dark room are quieter
     /// than a lit face.
     noise: [Option<f32>; BANDS],
+    /// Per half of the area (top, bottom), the local mean squared
+    /// differences its walk saw, by band of the smooth value. The noise's
+    /// level is learnt from the top's followed by the bottom's: what one walk
+    /// over the whole area would have seen, in the same order.
+    seen: [[Vec<f32>; BANDS]; 2],
+    /// Per half of the area, the rows beyond it that its walk reads.
+    edges: [Edges; 2],
+}
+
+/// Rows beyond one half of an area that its walk reads and the other half's
+/// thread writes: copies of them taken before either thread starts.
+#[derive(Default)]
+struct Edges {
+    /// Rows of the area whose bytes (of the channel's lane) `bytes` holds.
+    byte_rows: Range<usize>,
+    bytes: Vec<u8>,
+    /// Rows of the area whose filtered detail `detail` holds.
+    detail_rows: Range<usize>,
+    detail: Vec<i16>,
+}
+
+impl Edges {
+    fn bytes(&self, y: usize, w: usize) -> &[u8] {
+        debug_assert!(self.byte_rows.contains(&y), "row {y} was not copied");
+        &self.bytes[(y - self.byte_rows.start) * w..][..w]
+    }
+
+    fn detail(&self, y: usize, w: usize) -> &[i16] {
+        debug_assert!(self.detail_rows.contains(&y), "row {y} was not copied");
+        &self.detail[(y - self.detail_rows.start) * w..][..w]
+    }
 }
 
 /// Buffers kept from channel to channel and frame to frame to spare their
-/// allocation. The area is walked once, a row at a time, and each step keeps
-/// only the few rows round it that the next needs, so that what a row needs
-/// stays in the cache: whole maps of floats, written by one step and read by
-/// the next, made the denoising as slow as the memory.
+/// allocation; one per thread. The area is walked once, a row at a time, and
+/// each step keeps only the few rows round it that the next needs, so that
+/// what a row needs stays in the cache: whole maps of floats, written by one
+/// step and read by the next, made the denoising as slow as the memory.
 #[derive(Default)]
 struct Scratch {
     /// The channel's samples of the last [`SPLIT_SPAN`] rows read, by row
@@ -105,8 +138,6 @@ struct Scratch {
     /// A row's vertical sums of samples, and of squared differences.
     sums: Vec<u16>,
     column: Vec<f32>,
-    /// Per band of the smooth value, local mean squared differences seen.
-    seen: [Vec<f32>; BANDS],
     /// A row's frame x coordinates, how much of the denoising shows at
     /// each, its results, and the dither of each row of its pattern.
     xs: Vec<f32>,
@@ -122,16 +153,35 @@ const MOTION_SPAN: usize = 2 * MOTION_RADIUS + 1;
 /// Rows of smooth values kept: a row's motion, and so its filtering, waits
 /// for the squared differences of the [`MOTION_RADIUS`] rows below it.
 const SMOOTH_ROWS: usize = MOTION_RADIUS + 1;
+/// Rows beyond a row range whose bytes its walk reads: the smooth values of
+/// the [`MOTION_RADIUS`] rows beyond it, which its motion needs, need the
+/// bytes of [`SPLIT_RADIUS`] more.
+const EDGE_ROWS: usize = MOTION_RADIUS + SPLIT_RADIUS;
+
+/// Samples of the areas of a frame's channels from which each area is walked
+/// in two halves, on two threads. Walked at a few nanoseconds a sample, fewer
+/// take less time than a thread's start (about 84 µs here) saves.
+const SPLIT_FROM: usize = 32_768;
 
 /// What a walk over a channel's area does with each row once its motion is
 /// known.
-enum Walk<'a> {
+#[derive(Clone, Copy)]
+enum Walk {
     /// Nothing: the walk only teaches the noise's level.
     Learn,
     /// Keeps the row's detail as it is, with no noise level to filter against.
     Keep,
     /// Filters the row against the noise's level, 1 over it per band.
-    Filter(&'a [f32; BANDS]),
+    Filter([f32; BANDS]),
+}
+
+/// Which walk a pass over the frame's channels does.
+#[derive(Clone, Copy, PartialEq)]
+enum Phase {
+    /// Teaches the noise's level to the channels that have none yet.
+    Learn,
+    /// Filters every channel shown (or keeps its detail, with no noise level).
+    Denoise,
 }
 
 /// Rows of the ordered dither's pattern (`gain_field::dither`).
@@ -155,15 +205,28 @@ fn sample_positions(
 }
 
 /// Temporal denoising of the detail round the face; one per stream.
-#[derive(Default)]
 pub struct DetailDenoiser {
     /// The stream the state is of: format and frame size.
     stream: Option<(PixelFormat, usize, usize)>,
     /// One per channel, in the order the format's passes walk them.
     channels: Vec<ChannelState>,
     scratch: Scratch,
-    /// The scratch of the other thread, which filters the first plane.
+    /// The scratch of the other thread, which walks the areas' bottom halves.
     second: Scratch,
+    /// [`SPLIT_FROM`]; the tests split every area.
+    split_from: usize,
+}
+
+impl Default for DetailDenoiser {
+    fn default() -> DetailDenoiser {
+        DetailDenoiser {
+            stream: None,
+            channels: Vec::new(),
+            scratch: Scratch::default(),
+            second: Scratch::default(),
+            split_from: SPLIT_FROM,
+        }
+    }
 }
 
 impl DetailDenoiser {
@@ -186,64 +249,145 @@ impl DetailDenoiser {
         }
         let disc = Disc::new(crop, feather, strength);
         let passes = frame.format.passes();
-        let count = passes
-            .iter()
-            .flat_map(|pass| pass.lanes.iter().flatten())
-            .count();
-        self.channels.resize_with(count, ChannelState::default);
-        // Each pass walks a plane of its own; the planes' channels are
-        // independent, so the first plane (luma, of a YUV frame) is filtered
-        // on another thread while this one filters the rest.
-        let mut planes = frame.planes.each_mut().map(Some);
-        let mut channels = self.channels.iter_mut();
-        let mut work: Vec<PlaneWork> = passes
-            .iter()
-            .map(|pass| {
-                let (data, stride) = planes[pass.plane].take().expect("a plane a pass");
-                let sub = pass.subsample;
-                let plane = PlaneView {
-                    size: (frame.width.div_ceil(sub), frame.height.div_ceil(sub)),
-                    stride: *stride,
-                    bytes: pass.lanes.len(),
-                    subsample: sub,
-                };
-                let lanes = (0..pass.lanes.len())
-                    .filter(|&lane| pass.lanes[lane].is_some())
-                    .map(|lane| (lane, channels.next().expect("counted above")))
-                    .collect();
-                PlaneWork { data, plane, lanes }
+        let planes: Vec<PlaneView> = (passes.iter())
+            .flat_map(|pass| {
+                let plane = PlaneView::of(frame, pass);
+                pass.lanes.iter().flatten().map(move |_| plane)
             })
             .collect();
-        let rest = work.split_off(1);
-        let first = work.pop().expect("every format has a plane");
-        let (scratch, second) = (&mut self.scratch, &mut self.second);
-        if rest.is_empty() {
-            return first.filter(&disc, scratch);
+        self.channels
+            .resize_with(planes.len(), ChannelState::default);
+        for (channel, plane) in self.channels.iter_mut().zip(&planes) {
+            let area = disc.area(plane.subsample, plane.size);
+            if area[2] == 0 || area[3] == 0 || disc.strength <= 0.0 {
+                // Nothing shown: the past no longer matches what is shown next.
+                channel.detail.clear();
+                channel.area = [0; 4];
+            } else {
+                channel.move_to(area);
+            }
         }
-        beside(
-            || first.filter(&disc, second),
-            || {
-                for work in rest {
-                    work.filter(&disc, scratch);
+        // In a stream's first frames no noise level is learnt yet: the frame
+        // teaches it first, so that the first with a past is filtered.
+        if (self.channels.iter()).any(|c| c.walks(Phase::Learn)) {
+            self.walk_channels(frame, &disc, Phase::Learn);
+        }
+        self.walk_channels(frame, &disc, Phase::Denoise);
+    }
+
+    /// Walks the channels that `phase` walks, each area's top half on this
+    /// thread and its bottom half on another (the whole area here, where
+    /// the frame's areas are too small to split), then learns the noise's
+    /// level from what each walk saw.
+    fn walk_channels(&mut self, frame: &mut FrameMut, disc: &Disc, phase: Phase) {
+        let walks: Vec<bool> = self.channels.iter().map(|c| c.walks(phase)).collect();
+        let samples: usize = (self.channels.iter().zip(&walks))
+            .filter(|(_, walks)| **walks)
+            .map(|(c, _)| c.area[2] * c.area[3])
+            .sum();
+        let split = samples >= self.split_from;
+        let passes = frame.format.passes();
+        let views: Vec<PlaneView> = passes.iter().map(|p| PlaneView::of(frame, p)).collect();
+        let mut planes = frame.planes.each_mut().map(Some);
+        let mut channels = self.channels.iter_mut().zip(&walks);
+        let [mut tops, mut bottoms] = [Vec::new(), Vec::new()];
+        for (pass, plane) in passes.iter().zip(views) {
+            let (data, _) = planes[pass.plane].take().expect("a plane a pass");
+            let mut lanes = Vec::new();
+            for (lane, _) in pass.lanes.iter().enumerate().filter(|(_, c)| c.is_some()) {
+                let (channel, walks) = channels.next().expect("a channel a lane");
+                if *walks {
+                    lanes.push((lane, channel));
                 }
-            },
-        );
+            }
+            let Some((_, first)) = lanes.first() else {
+                continue;
+            };
+            // The plane's channels hold the same area.
+            let [_, y0, _, h] = first.area;
+            let mid = if split && h >= 2 { h / 2 } else { h };
+            let walk = |c: &ChannelState| match phase {
+                Phase::Learn => Walk::Learn,
+                Phase::Denoise => match per_band(&c.noise) {
+                    Some(noise) => Walk::Filter(noise.map(|n| 1.0 / n)),
+                    None => Walk::Keep,
+                },
+            };
+            let (mut top, mut bottom) = (Vec::new(), Vec::new());
+            for (lane, channel) in lanes {
+                if mid < h {
+                    channel.copy_edges(data, &plane, lane, mid);
+                }
+                let walk = walk(channel);
+                let ChannelState {
+                    area,
+                    detail,
+                    seen,
+                    edges,
+                    ..
+                } = channel;
+                let (top_detail, bottom_detail) = detail.split_at_mut(mid * area[2]);
+                let [top_seen, bottom_seen] = seen;
+                let [top_edges, bottom_edges] = &*edges;
+                top.push(Band {
+                    lane,
+                    area: *area,
+                    rows: 0..mid,
+                    detail: top_detail,
+                    edges: top_edges,
+                    seen: top_seen,
+                    walk,
+                });
+                if mid < h {
+                    bottom.push(Band {
+                        lane,
+                        area: *area,
+                        rows: mid..h,
+                        detail: bottom_detail,
+                        edges: bottom_edges,
+                        seen: bottom_seen,
+                        walk,
+                    });
+                }
+            }
+            let at = ((y0 + mid) * plane.stride).min(data.len());
+            let (top_data, bottom_data) = data.split_at_mut(at);
+            tops.push(Half {
+                data: top_data,
+                data_row: 0,
+                plane,
+                bands: top,
+            });
+            if !bottom.is_empty() {
+                bottoms.push(Half {
+                    data: bottom_data,
+                    data_row: y0 + mid,
+                    plane,
+                    bands: bottom,
+                });
+            }
+        }
+        let (scratch, second) = (&mut self.scratch, &mut self.second);
+        if bottoms.is_empty() {
+            walk_halves(tops, disc, scratch);
+        } else {
+            beside(
+                || walk_halves(bottoms, disc, second),
+                || walk_halves(tops, disc, scratch),
+            );
+        }
+        for (channel, _) in (self.channels.iter_mut().zip(&walks)).filter(|(_, w)| **w) {
+            let [top, bottom] = &mut channel.seen;
+            top.iter_mut().zip(bottom).for_each(|(t, b)| t.append(b));
+            learn_noise(&mut channel.noise, top);
+        }
     }
 }
 
-/// One plane to filter, and its channels with their state.
-struct PlaneWork<'a> {
-    data: &'a mut [u8],
-    plane: PlaneView,
-    /// Per channel, its byte in a sample.
-    lanes: Vec<(usize, &'a mut ChannelState)>,
-}
-
-impl PlaneWork<'_> {
-    fn filter(self, disc: &Disc, scratch: &mut Scratch) {
-        for (lane, channel) in self.lanes {
-            channel.filter(self.data, &self.plane, lane, disc, scratch);
-        }
+/// Walks `halves` in turn, working in `s`.
+fn walk_halves(halves: Vec<Half>, disc: &Disc, s: &mut Scratch) {
+    for half in halves {
+        half.walk(disc, s);
     }
 }
 
@@ -354,6 +498,7 @@ impl DiscRow<'_> {
 }
 
 /// One plane's layout.
+#[derive(Clone, Copy)]
 struct PlaneView {
     /// Samples across and down.
     size: (usize, usize),
@@ -364,53 +509,141 @@ struct PlaneView {
     subsample: usize,
 }
 
+impl PlaneView {
+    /// The plane `pass` walks in `frame`.
+    fn of(frame: &FrameMut, pass: &Pass) -> PlaneView {
+        let sub = pass.subsample;
+        PlaneView {
+            size: (frame.width.div_ceil(sub), frame.height.div_ceil(sub)),
+            stride: frame.planes[pass.plane].1,
+            bytes: pass.lanes.len(),
+            subsample: sub,
+        }
+    }
+}
+
 impl ChannelState {
-    /// Filters byte `lane` of every sample of `plane` that `disc` reaches,
-    /// working in `s`.
-    fn filter(
-        &mut self,
-        data: &mut [u8],
-        plane: &PlaneView,
-        lane: usize,
-        disc: &Disc,
-        s: &mut Scratch,
-    ) {
-        let area = disc.area(plane.subsample, plane.size);
-        let [_, _, w, h] = area;
-        if w == 0 || h == 0 || disc.strength <= 0.0 {
-            // Nothing shown: the past no longer matches what is shown next.
-            self.detail.clear();
-            self.area = [0; 4];
+    /// Whether `phase` walks this channel: one the disc reaches, and to
+    /// learn the noise's level, one that has none yet.
+    fn walks(&self, phase: Phase) -> bool {
+        let shown = self.area[2] > 0 && self.area[3] > 0;
+        shown && (phase == Phase::Denoise || per_band(&self.noise).is_none())
+    }
+
+    /// Copies into `edges` what each half of the area, split at row `mid`,
+    /// reads beyond it: of `data`, the plane whose byte `lane` the channel
+    /// is, [`EDGE_ROWS`] rows; of the filtered detail, [`MOTION_RADIUS`].
+    fn copy_edges(&mut self, data: &[u8], plane: &PlaneView, lane: usize, mid: usize) {
+        let [x0, y0, w, h] = self.area;
+        let below = |rows: usize| mid..(mid + rows).min(h);
+        let above = |rows: usize| mid.saturating_sub(rows)..mid;
+        let beyond = [
+            (below(EDGE_ROWS), below(MOTION_RADIUS)),
+            (above(EDGE_ROWS), above(MOTION_RADIUS)),
+        ];
+        for (edges, (byte_rows, detail_rows)) in self.edges.iter_mut().zip(beyond) {
+            edges.bytes.resize(byte_rows.len() * w, 0);
+            for (y, out) in byte_rows.clone().zip(edges.bytes.chunks_exact_mut(w)) {
+                let pixels = &data[(y0 + y) * plane.stride + x0 * plane.bytes..];
+                lane_bytes(pixels, plane.bytes, lane, out);
+            }
+            edges.detail.clear();
+            (edges.detail)
+                .extend_from_slice(&self.detail[detail_rows.start * w..detail_rows.end * w]);
+            (edges.byte_rows, edges.detail_rows) = (byte_rows, detail_rows);
+        }
+    }
+
+    /// Holds `area` from now on: the filtered detail it shares with the area
+    /// held so far is kept, the rest has none yet.
+    fn move_to(&mut self, area: [usize; 4]) {
+        if self.area == area && !self.detail.is_empty() {
             return;
         }
-        self.move_to(area);
+        let [x0, y0, w, h] = area;
+        let [ox, oy, ow, oh] = self.area;
+        let moved = &mut self.moved;
+        moved.clear();
+        moved.resize(w * h, NO_DETAIL);
+        if !self.detail.is_empty() {
+            let (left, right) = (x0.max(ox), (x0 + w).min(ox + ow));
+            for y in y0.max(oy)..(y0 + h).min(oy + oh) {
+                if left < right {
+                    let to = (y - y0) * w;
+                    let from = (y - oy) * ow;
+                    moved[to + left - x0..to + right - x0]
+                        .copy_from_slice(&self.detail[from + left - ox..from + right - ox]);
+                }
+            }
+        }
+        self.area = area;
+        std::mem::swap(&mut self.detail, &mut self.moved);
+    }
+}
+
+/// The rows of a plane's area that one thread walks, for each of the
+/// plane's channels it walks.
+struct Half<'a> {
+    /// The plane's bytes from row `data_row` on.
+    data: &'a mut [u8],
+    data_row: usize,
+    plane: PlaneView,
+    bands: Vec<Band<'a>>,
+}
+
+/// One channel's rows of a [`Half`], with what its walk reads and keeps.
+struct Band<'a> {
+    /// The channel's byte in a sample.
+    lane: usize,
+    /// The channel's whole area, and the rows of it walked.
+    area: [usize; 4],
+    rows: Range<usize>,
+    /// Filtered detail of `rows`.
+    detail: &'a mut [i16],
+    /// What the walk reads beyond `rows`.
+    edges: &'a Edges,
+    /// The local mean squared differences the walk saw, by band.
+    seen: &'a mut [Vec<f32>; BANDS],
+    walk: Walk,
+}
+
+impl Half<'_> {
+    /// Walks each band in turn, working in `s`.
+    fn walk(self, disc: &Disc, s: &mut Scratch) {
         // AVX2, where the CPU has it, doubles the vectors' width of the loops
         // over a row, with the same results: both builds run the same IEEE
         // operations in the same order (see `gain_field::gain_row`).
         #[cfg(target_arch = "x86_64")]
         if std::arch::is_x86_feature_detected!("avx2") {
             // SAFETY: the CPU has AVX2, checked just above.
-            return unsafe { self.filter_avx2(data, plane, lane, disc, s) };
+            return unsafe { self.walk_avx2(disc, s) };
         }
-        self.filter_portable(data, plane, lane, disc, s)
+        self.walk_portable(disc, s)
     }
 
-    /// `filter_portable` built for AVX2.
+    /// `walk_portable` built for AVX2.
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    fn filter_avx2(
-        &mut self,
-        data: &mut [u8],
-        plane: &PlaneView,
-        lane: usize,
-        disc: &Disc,
-        s: &mut Scratch,
-    ) {
-        self.filter_portable(data, plane, lane, disc, s)
+    fn walk_avx2(self, disc: &Disc, s: &mut Scratch) {
+        self.walk_portable(disc, s)
     }
 
-    // Always inlined, so that `filter_avx2` holds a copy built for AVX2.
-    //
+    // Always inlined, so that `walk_avx2` holds a copy built for AVX2.
+    #[inline(always)]
+    fn walk_portable(self, disc: &Disc, s: &mut Scratch) {
+        let Half {
+            data,
+            data_row,
+            plane,
+            bands,
+        } = self;
+        for mut band in bands {
+            band.walk(data, data_row, &plane, disc, s);
+        }
+    }
+}
+
+impl Band<'_> {
     // The steps, per sample, in the operations (and their order) of the
     // plain denoiser in the tests, which works on whole maps: the smooth
     // value, the mean of the 5 × 5 samples round it; the detail, the sample
@@ -418,14 +651,16 @@ impl ChannelState {
     // squared (0 where there is none); their 3 × 3 mean, the motion; then,
     // with the noise's level learnt from the frames before, the share of the
     // new detail taken. A row is filtered and written once the squared
-    // differences of the row below it are known; the motion of the whole
-    // area then updates the noise's level for the next frame.
+    // differences of the row below it are known; the motion of the band's
+    // rows, sampled every `step`th sample of the area, goes to `seen`.
+    /// Walks the band's rows once, in order, doing its `walk` with each
+    /// once its motion is known. `data` holds the plane from row `data_row`.
     #[inline(always)]
-    fn filter_portable(
+    fn walk(
         &mut self,
         data: &mut [u8],
+        data_row: usize,
         plane: &PlaneView,
-        lane: usize,
         disc: &Disc,
         s: &mut Scratch,
     ) {
@@ -437,83 +672,57 @@ impl ChannelState {
         s.motion.resize(w, 0.0);
         s.sums.resize(w, 0);
         s.column.resize(w, 0.0);
-        // Every third sample, or fewer in a large area: a quantile of about
-        // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
-        let step = (w * h / NOISE_SAMPLES).max(3);
-        if per_band(&self.noise).is_none() {
-            // No level learnt yet, in a stream's first frames: this frame
-            // teaches it first, so that the first with a past is filtered.
-            self.walk(&Walk::Learn, data, plane, lane, disc, step, s);
-        }
-        // Over the noise, per band: what a local mean squared difference is
-        // compared with. Without it the frame passes and only teaches it.
-        let inverse = per_band(&self.noise).map(|noise| noise.map(|n| 1.0 / n));
-        if inverse.is_some() {
+        if let Walk::Filter(_) = self.walk {
             sample_positions(x0, w, plane.subsample, &mut s.xs, &mut s.dither);
             s.relit.resize(w, 0.0);
             s.weight.resize(w, 0.0);
         }
-        let walk = match &inverse {
-            Some(inverse) => Walk::Filter(inverse),
-            None => Walk::Keep,
-        };
-        self.walk(&walk, data, plane, lane, disc, step, s);
-    }
-
-    /// Walks the area once, a row at a time, doing `walk` with each row once
-    /// its motion is known, and learns the noise's level from its motion,
-    /// sampled every `step`th sample.
-    #[allow(clippy::too_many_arguments)]
-    #[inline(always)]
-    fn walk(
-        &mut self,
-        walk: &Walk,
-        data: &mut [u8],
-        plane: &PlaneView,
-        lane: usize,
-        disc: &Disc,
-        step: usize,
-        s: &mut Scratch,
-    ) {
-        let [_, _, w, h] = self.area;
-        s.seen.iter_mut().for_each(Vec::clear);
-        for y in 0..SPLIT_RADIUS.min(h) {
-            self.read_row(y, data, plane, lane, s);
+        // Every third sample, or fewer in a large area: a quantile of about
+        // [`NOISE_SAMPLES`] is plenty, and choosing it costs with its count.
+        let step = (w * h / NOISE_SAMPLES).max(3);
+        self.seen.iter_mut().for_each(Vec::clear);
+        let Range { start, end } = self.rows;
+        // The first row whose squared differences the band's motion needs.
+        let first = start.saturating_sub(MOTION_RADIUS);
+        for y in first.saturating_sub(SPLIT_RADIUS)..(first + SPLIT_RADIUS).min(h) {
+            self.read_row(y, data, data_row, plane, s);
         }
-        for k in 0..h + MOTION_RADIUS {
+        for k in first..end + MOTION_RADIUS {
             if k < h {
                 if k + SPLIT_RADIUS < h {
-                    self.read_row(k + SPLIT_RADIUS, data, plane, lane, s);
+                    self.read_row(k + SPLIT_RADIUS, data, data_row, plane, s);
                 }
                 self.squared_row(k, (w, h), s);
             }
-            if k >= MOTION_RADIUS {
+            if k >= start + MOTION_RADIUS {
                 let y = k - MOTION_RADIUS;
                 self.motion_row(y, (w, h), step, s);
-                self.filter_row(y, walk, data, plane, lane, disc, s);
+                self.filter_row(y, data, data_row, plane, disc, s);
             }
         }
-        learn_noise(&mut self.noise, &mut s.seen);
     }
 
-    /// Copies byte `lane` of the samples of row `y` of the area into the ring
-    /// of rows `s.bytes`.
+    /// Copies the channel's bytes of row `y` of the area into the ring of
+    /// rows `s.bytes`.
     #[inline(always)]
-    fn read_row(&self, y: usize, data: &[u8], plane: &PlaneView, lane: usize, s: &mut Scratch) {
+    fn read_row(&self, y: usize, data: &[u8], data_row: usize, plane: &PlaneView, s: &mut Scratch) {
         let [x0, y0, w, _] = self.area;
         let row = &mut s.bytes[(y % SPLIT_SPAN) * w..][..w];
-        let pixels = &data[(y0 + y) * plane.stride + x0 * plane.bytes..];
-        // With the sample's size known to the compiler, the loop picks bytes
-        // out of whole vectors of pixels rather than one at a time.
-        match plane.bytes {
-            1 => row.copy_from_slice(&pixels[..w]),
-            2 => lane_of::<2>(pixels, lane, row),
-            3 => lane_of::<3>(pixels, lane, row),
-            4 => lane_of::<4>(pixels, lane, row),
-            bytes => {
-                let samples = pixels[lane..].iter().step_by(bytes);
-                row.iter_mut().zip(samples).for_each(|(v, &b)| *v = b);
-            }
+        if self.rows.contains(&y) {
+            let pixels = &data[(y0 + y - data_row) * plane.stride + x0 * plane.bytes..];
+            lane_bytes(pixels, plane.bytes, self.lane, row);
+        } else {
+            row.copy_from_slice(self.edges.bytes(y, w));
+        }
+    }
+
+    /// The filtered detail of the frame before along row `y` of the area.
+    #[inline(always)]
+    fn past(&self, y: usize, w: usize) -> &[i16] {
+        if self.rows.contains(&y) {
+            &self.detail[(y - self.rows.start) * w..][..w]
+        } else {
+            self.edges.detail(y, w)
         }
     }
 
@@ -528,7 +737,7 @@ impl ChannelState {
         for (((squared, &b), &smooth), &past) in (s.squared[y % MOTION_SPAN].iter_mut())
             .zip(bytes)
             .zip(&*smooth)
-            .zip(&self.detail[y * w..(y + 1) * w])
+            .zip(self.past(y, w))
         {
             let d = b as f32 - smooth;
             let difference = d - restored(past, d);
@@ -536,26 +745,24 @@ impl ChannelState {
         }
     }
 
-    /// Does `walk` with row `y` of the area: filtering, with the motion in
-    /// `s.motion`, writes what `disc` shows of the row into byte `lane` of
-    /// `data`.
-    #[allow(clippy::too_many_arguments)]
+    /// Does the band's walk with row `y` of the area: filtering, with the
+    /// motion in `s.motion`, writes what `disc` shows of the row into the
+    /// channel's byte of `data`, the plane from row `data_row`.
     #[inline(always)]
     fn filter_row(
         &mut self,
         y: usize,
-        walk: &Walk,
         data: &mut [u8],
+        data_row: usize,
         plane: &PlaneView,
-        lane: usize,
         disc: &Disc,
         s: &mut Scratch,
     ) {
         let [x0, y0, w, _] = self.area;
-        let row = y * w..(y + 1) * w;
+        let row = (y - self.rows.start) * w..(y - self.rows.start + 1) * w;
         let bytes = &s.bytes[(y % SPLIT_SPAN) * w..][..w];
         let smooth = &s.smooth[y % SMOOTH_ROWS];
-        let inverse = match walk {
+        let inverse = match &self.walk {
             Walk::Learn => return,
             Walk::Keep => {
                 for ((past, &b), &smooth) in self.detail[row].iter_mut().zip(bytes).zip(smooth) {
@@ -571,7 +778,7 @@ impl ChannelState {
         let (first, end) = disc.span(frame_y, x0, w, plane.subsample);
         let detail = &mut self.detail[row];
         let ratio = &mut s.motion;
-        over_noise(ratio, smooth, inverse);
+        over_noise(ratio, smooth, &inverse);
         for part in [0..first, end..w] {
             for ((past, &b), (&smooth, &ratio)) in (detail[part.clone()].iter_mut())
                 .zip(&bytes[part.clone()])
@@ -615,7 +822,8 @@ impl ChannelState {
             *past = stored(filtered);
             *relit = v + weight * (filtered - d) + dither;
         }
-        let pixels = &mut data[(y0 + y) * plane.stride + (x0 + first) * plane.bytes..];
+        let pixels = &mut data[(y0 + y - data_row) * plane.stride + (x0 + first) * plane.bytes..];
+        let lane = self.lane;
         match plane.bytes {
             1 => set_lane::<1>(pixels, 0, relit),
             2 => set_lane::<2>(pixels, lane, relit),
@@ -630,9 +838,9 @@ impl ChannelState {
 
     /// The motion of row `y` of the area, from the squared differences of
     /// the rows round it, into `s.motion`; and every `step`th sample of the
-    /// area's that the frame before had detail at, into `s.seen` by band.
+    /// area's that the frame before had detail at, into `seen` by band.
     #[inline(always)]
-    fn motion_row(&self, y: usize, (w, h): (usize, usize), step: usize, s: &mut Scratch) {
+    fn motion_row(&mut self, y: usize, (w, h): (usize, usize), step: usize, s: &mut Scratch) {
         let (lo, hi) = (
             y.saturating_sub(MOTION_RADIUS),
             (y + MOTION_RADIUS + 1).min(h),
@@ -659,41 +867,36 @@ impl ChannelState {
         }
         box_row::<MOTION_SPAN>(&s.column, &mut s.motion);
         let smooth = &s.smooth[y % SMOOTH_ROWS];
+        // The samples are chosen by their index in the whole area, so that
+        // the halves see together what one walk over it would.
         let row = y * w..(y + 1) * w;
+        let offset = self.rows.start * w;
         let mut i = row.start.div_ceil(step) * step;
         while i < row.end {
-            if self.detail[i] != NO_DETAIL {
+            if self.detail[i - offset] != NO_DETAIL {
                 let x = i - row.start;
-                s.seen[band(smooth[x])].push(s.motion[x]);
+                self.seen[band(smooth[x])].push(s.motion[x]);
             }
             i += step;
         }
     }
+}
 
-    /// Holds `area` from now on: the filtered detail it shares with the area
-    /// held so far is kept, the rest has none yet.
-    fn move_to(&mut self, area: [usize; 4]) {
-        if self.area == area && !self.detail.is_empty() {
-            return;
+/// Byte `lane` of each of the first `out.len()` samples of `bytes` bytes of
+/// `pixels`, into `out`.
+#[inline(always)]
+fn lane_bytes(pixels: &[u8], bytes: usize, lane: usize, out: &mut [u8]) {
+    // With the sample's size known to the compiler, the loop picks bytes out
+    // of whole vectors of pixels rather than one at a time.
+    match bytes {
+        1 => out.copy_from_slice(&pixels[..out.len()]),
+        2 => lane_of::<2>(pixels, lane, out),
+        3 => lane_of::<3>(pixels, lane, out),
+        4 => lane_of::<4>(pixels, lane, out),
+        bytes => {
+            let samples = pixels[lane..].iter().step_by(bytes);
+            out.iter_mut().zip(samples).for_each(|(v, &b)| *v = b);
         }
-        let [x0, y0, w, h] = area;
-        let [ox, oy, ow, oh] = self.area;
-        let moved = &mut self.moved;
-        moved.clear();
-        moved.resize(w * h, NO_DETAIL);
-        if !self.detail.is_empty() {
-            let (left, right) = (x0.max(ox), (x0 + w).min(ox + ow));
-            for y in y0.max(oy)..(y0 + h).min(oy + oh) {
-                if left < right {
-                    let to = (y - y0) * w;
-                    let from = (y - oy) * ow;
-                    moved[to + left - x0..to + right - x0]
-                        .copy_from_slice(&self.detail[from + left - ox..from + right - ox]);
-                }
-            }
-        }
-        self.area = area;
-        std::mem::swap(&mut self.detail, &mut self.moved);
     }
 }
 
