@@ -229,17 +229,7 @@ fn predicted_monitor_is_a_small_video_at_the_face_rate() {
     );
     assert_eq!(predicted.pts(), Some(gst::ClockTime::ZERO));
     // A white monitor lit the face: the predicted screen is bright and neutral.
-    let map = predicted.map_readable().unwrap();
-    let mean: Vec<f64> = (0..3)
-        .map(|c| {
-            map.iter()
-                .skip(c)
-                .step_by(3)
-                .map(|&v| v as f64)
-                .sum::<f64>()
-                / (256.0 * 128.0)
-        })
-        .collect();
+    let mean = channel_means(&predicted.map_readable().unwrap());
     assert!(
         mean.iter().all(|&m| m > 90.0),
         "predicted white monitor too dark: {mean:?}"
@@ -249,8 +239,9 @@ fn predicted_monitor_is_a_small_video_at_the_face_rate() {
         "predicted white monitor not neutral: {mean:?}"
     );
 
-    // A dark blue monitor: the prediction follows it down. (The default model gets
-    // the brightness of the screen but not its colour; see the model card.)
+    // A dark blue monitor: the prediction follows it down, and towards blue (the
+    // default model's refitted light decoder follows the screen's colour; see the
+    // model card).
     h.push(buffer(
         &render_face(Vec3::new(0.05, 0.05, 0.6)),
         &c,
@@ -260,18 +251,31 @@ fn predicted_monitor_is_a_small_video_at_the_face_rate() {
     .unwrap();
     h.pull().unwrap();
     let dark = side.pull().unwrap();
-    let dark_mean = dark
-        .map_readable()
-        .unwrap()
-        .iter()
-        .map(|&v| v as f64)
-        .sum::<f64>()
-        / (3.0 * 256.0 * 128.0);
+    let dark = channel_means(&dark.map_readable().unwrap());
+    let dark_mean = dark.iter().sum::<f64>() / 3.0;
     let white_mean = mean.iter().sum::<f64>() / 3.0;
     assert!(
         dark_mean < 0.5 * white_mean,
         "a dark monitor must be predicted darker than a white one ({dark_mean} vs {white_mean})"
     );
+    let blue_share = |rgb: [f64; 3]| rgb[2] / rgb.iter().sum::<f64>();
+    assert!(
+        blue_share(dark) > blue_share(mean) + 0.2,
+        "a blue monitor must be predicted bluer than a white one ({dark:?} vs {mean:?})"
+    );
+}
+
+/// Mean of each channel of packed 8-bit RGB pixels.
+fn channel_means(rgb: &[u8]) -> [f64; 3] {
+    let pixels = (rgb.len() / 3) as f64;
+    std::array::from_fn(|c| {
+        rgb.iter()
+            .skip(c)
+            .step_by(3)
+            .map(|&v| v as f64)
+            .sum::<f64>()
+            / pixels
+    })
 }
 
 #[test]

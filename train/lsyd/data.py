@@ -115,7 +115,7 @@ def centre_square(frames: np.ndarray) -> np.ndarray:
     return frames[..., y0 : y0 + s, x0 : x0 + s, :]
 
 
-def _cached(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+def session_frames(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarray]:
     """A session's frames at network resolution and its lights, computed once and kept
     next to the capture (``cache-<resolution>.npz``)."""
     path = session / f"cache-{resolution}.npz"
@@ -135,7 +135,7 @@ def keypoint_pairs(root: Path, resolution: int, rule: pairing.PairingRule) -> tu
     images, lights, pairs, reports = [], [], [], []
     offset = 0
     for d in capture_dirs(root):
-        imgs, lit = _cached(d, resolution)
+        imgs, lit = session_frames(d, resolution)
         keypoints = np.load(d / "keypoints.npy")
         p = pairing.find_pairs(keypoints, lit, rule)
         truth = d / "truth.npy"

@@ -144,10 +144,12 @@ def export_network(
 
 
 def write_stages(net: model.LcfnNet, specs: dict, out: Path, ref: dict[str, np.ndarray], rewrite: bool = True) -> None:
-    """The network's five stages as ONNX files in ``out``, traced on ``reference_run``'s
-    tensors, and unless ``rewrite`` is off rewritten by ``optimise``."""
-    for name, module in stage_modules(net).items():
-        spec = specs[name]
+    """The network's stages that ``specs`` names (all five, or fewer to replace some of a
+    model's) as ONNX files in ``out``, traced on ``reference_run``'s tensors, and unless
+    ``rewrite`` is off rewritten by ``optimise``."""
+    modules = stage_modules(net)
+    for name, spec in specs.items():
+        module = modules[name]
         inputs = tuple(torch.from_numpy(ref[t["name"]]) for t in spec["inputs"])
         torch.onnx.export(
             module,
@@ -236,6 +238,7 @@ def main() -> None:
         "arch": cfg.net.arch,
         "steps": cfg.steps,
         "batch": cfg.batch,
+        "lr": cfg.lr,
         "seed": cfg.seed,
         "pairs": cfg.pairs,
         "losses": dataclasses.asdict(cfg.weights),

@@ -171,6 +171,7 @@ def export_stage(work: Path, out: Path, name: str) -> None:
         "arch": cfg.net.arch,
         "steps": cfg.steps,
         "batch": cfg.batch,
+        "lr": cfg.lr,
         "seed": cfg.seed,
         "pairs": cfg.pairs,
         "init": cfg.init,

@@ -20,13 +20,15 @@ def deskstage(*args: str) -> None:
 
 @pytest.fixture(scope="session")
 def sim_data() -> Path:
-    """One 30 s capture session at 10 fps (256 x 256), 24 paired poses, and the held-out set."""
+    """One 30 s capture session at 10 fps (256 x 256), 24 paired poses, the held-out and validation sets."""
     if not (DATA / "captures" / "session-000" / "keypoints.npy").exists():
         deskstage("captures", "--out", str(DATA / "captures"), "--sessions", "1", "--seconds", "30")
     if not (DATA / "paired" / "truth.npy").exists():
         deskstage("paired", "--out", str(DATA / "paired"), "--poses", "24", "--size", "128")
     if not (DATA / "heldout" / "clean.npy").exists():
         deskstage("heldout", "--out", str(DATA / "heldout"))
+    if not (DATA / "validation" / "clean.npy").exists():
+        deskstage("validation", "--out", str(DATA / "validation"))
     return DATA
 
 

@@ -22,8 +22,12 @@ import numpy as np
 import torch
 
 from .. import contract, data
-from ..runs import hardware, read_config
+from ..model import PAPER_WIDTHS
+from ..runs import LossWeights, TrainConfig, hardware, read_config
 from . import ROOT, benchmark, metrics
+
+# Colour correlation from which the card says the predicted monitor follows the screen's colour.
+COLOUR_FOLLOWS = 0.5
 
 
 def heldout(folder: Path, held: data.Heldout) -> dict:
@@ -89,8 +93,9 @@ def measure(model: Path, held: data.Heldout, data_root: Path) -> dict:
     }
 
 
-def data_lines(data_root: Path, run: Path | None) -> list[str]:
-    """What the model trained on, from the captures' metadata and the run's pairing record."""
+def data_lines(data_root: Path, run: Path | None, recorded: str) -> list[str]:
+    """What the model trained on, from the captures' metadata and the run's pairing record (or,
+    without the run, the line the export ``recorded``)."""
     metas = [json.loads(p.read_text()) for p in sorted((data_root / "captures").glob("*/meta.json"))]
     if not metas:
         return [f"- Captures: not found under {data_root}/captures."]
@@ -105,7 +110,9 @@ def data_lines(data_root: Path, run: Path | None) -> list[str]:
         "(`deskstage all --out data`).",
     ]
     pairing_path = run / "pairing.json" if run else None
-    if pairing_path and pairing_path.exists():
+    if not (pairing_path and pairing_path.exists()):
+        lines.append(f"- Training data as the export recorded it: {recorded}.")
+    else:
         record = json.loads(pairing_path.read_text())
         sessions = record["sessions"]
         pairs = sum(x["pairs"] for x in sessions)
@@ -132,6 +139,47 @@ def machine_line(sessions: list[dict]) -> str:
     return f"{' and '.join(machines)} in {minutes:.0f} minutes"
 
 
+def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
+    """How the model was built and trained, from its manifest (what the export recorded of the
+    run), with the learning rate from the run's configuration where the run is at hand."""
+    t = m["training"]
+    w = LossWeights(**t["losses"])
+    res, widths = m["resolution"], list(m["widths"])
+    lr = cfg.lr if cfg else t.get("lr")
+    lr = f"lr {lr:g}, " if lr else ""
+    lines = [
+        f"- Architecture: the paper's LCFN U-Net at {res} x {res}, widths {widths} "
+        f"({widths[1] / PAPER_WIDTHS[1]:g} of the paper's 32-64-128-256-512), light codes of {m['code_dim']}.",
+        f"- Training: {t['steps']} steps of batch {t['batch']}, Adam ({lr}cosine to a tenth), seed {t['seed']}, "
+        f"on {machine_line(t.get('machine', []))} (`scripts/train-all.sh`).",
+        f"- Losses (paper eqs. 3-6): L1 x{w.l1:g}; perceptual x{w.perceptual:g}, an offline stand-in "
+        "(Laplacian-pyramid L1 plus 0.5 (1 - SSIM); ImageNet networks cannot be downloaded here); "
+        f"cycle x{w.cycle:g}; LSGAN PatchGAN x{w.adversarial:g}; monitor loss x{w.monitor:g} (L1, gradient L1 "
+        "as its perceptual term, and cycle on the target light). "
+        f"{100 * w.unknown_source:.0f}% of steps de-light with the predicted source light.",
+    ]
+    if w.delit_consistency or w.monitor_colour:
+        lines.append(
+            "- Added to the paper's losses (each off in the tables' runs; README, \"Beyond the paper\"): "
+            f"de-lit consistency x{w.delit_consistency:g}, the standardised distance between the de-lit "
+            "features of a pair's two images, each de-lit with its own light; monitor colour "
+            f"x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true screens' "
+            "mean colours."
+        )
+    refit = t.get("light_refit")
+    if refit:
+        before, after = refit["validation_before"], refit["validation_after"]
+        lines.append(
+            f"- Light decoder refitted on the frozen encoder (`lsyd.light_refit`): {refit['steps']} steps of batch "
+            f"{refit['batch']} over the {refit['frames']:,} captured frames' features, Adam (lr {refit['lr']:g}, "
+            f"cosine to a tenth), monitor colour x{refit['colour']:g}, in {refit['seconds'] / 60:.0f} minutes; "
+            "every other stage as trained. On the validation set its colour correlation went from "
+            f"{before['colour_corr']:.2f} to {after['colour_corr']:.2f}, its monitor MAE from "
+            f"{before['monitor_mae']:.4f} to {after['monitor_mae']:.4f}."
+        )
+    return lines
+
+
 def card(model: Path, run: Path | None, data_root: Path) -> str:
     m = contract.read(model / "model.json")
     h = m["metrics"].get("heldout", {})
@@ -146,33 +194,12 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
         "",
         "## Data",
         "",
-        *data_lines(data_root, run),
+        *data_lines(data_root, run, m["training"].get("data", "not recorded")),
         "",
         "## Configuration",
         "",
     ]
-    if cfg:
-        w = cfg.weights
-        machine = machine_line(m["training"].get("machine", []))
-        lines += [
-            f"- Architecture: the paper's LCFN U-Net at {cfg.net.resolution} x {cfg.net.resolution}, widths "
-            f"{list(cfg.net.widths)} ({cfg.net.width:g} of the paper's 32-64-128-256-512), light codes of 256.",
-            f"- Training: {cfg.steps} steps of batch {cfg.batch}, Adam (lr {cfg.lr:g}, cosine to a tenth), "
-            f"seed {cfg.seed}, on {machine} (`scripts/train-all.sh`).",
-            f"- Losses (paper eqs. 3-6): L1 x{w.l1:g}; perceptual x{w.perceptual:g}, an offline stand-in "
-            "(Laplacian-pyramid L1 plus 0.5 (1 - SSIM); ImageNet networks cannot be downloaded here); "
-            f"cycle x{w.cycle:g}; LSGAN PatchGAN x{w.adversarial:g}; monitor loss x{w.monitor:g} (L1, gradient L1 "
-            "as its perceptual term, and cycle on the target light). "
-            f"{100 * w.unknown_source:.0f}% of steps de-light with the predicted source light.",
-        ]
-        if w.delit_consistency or w.monitor_colour:
-            lines.append(
-                "- Added to the paper's losses (each off in the tables' runs; README, \"Beyond the paper\"): "
-                f"de-lit consistency x{w.delit_consistency:g}, the standardised distance between the de-lit "
-                "features of a pair's two images, each de-lit with its own light; monitor colour "
-                f"x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true screens' "
-                "mean colours."
-            )
+    lines += configuration_lines(m, cfg)
     lines += [
         f"- Size: {h.get('parameters_mb', 0):.1f} MB of ONNX graphs; {h.get('gflop_per_frame', 0):.3f} GFLOP a "
         "frame as the element runs it (encoder, source light code, de-lighting, decoder).",
@@ -199,8 +226,13 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
             "",
             "The predicted monitor against the true one, over the held-out frames: its brightness correlates "
             f"{known['monitor_brightness_corr']:.2f}, its colour (blue minus red) {known['monitor_colour_corr']:.2f}. "
-            "A prediction that follows brightness but not colour relights the strength of an unknown light "
-            "better than its hue; give the element the monitor stream where colour matters.",
+            + (
+                "The prediction follows the screen's colour as well as its brightness, so an unknown light is "
+                "relit in its hue too; the monitor stream, where there is one, still relights best (the known row)."
+                if known["monitor_colour_corr"] >= COLOUR_FOLLOWS
+                else "A prediction that follows brightness but not colour relights the strength of an unknown light "
+                "better than its hue; give the element the monitor stream where colour matters."
+            ),
         ]
     lines += [
         "",

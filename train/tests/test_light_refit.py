@@ -1,0 +1,32 @@
+"""The light decoder's refit: it trains the very function the light decoder stage runs, and
+writes a model whose other stages are the original's, byte for byte."""
+
+import torch
+
+from lsyd import contract, data, light_refit
+from lsyd.export import network_from_model
+
+
+def test_the_refit_trains_what_the_light_decoder_stage_runs(sim_data, shipped_model):
+    net = network_from_model(shipped_model)
+    held = data.Heldout.load(sim_data / "heldout")
+    frames, _ = light_refit.test_set(held, contract.read(shipped_model / "model.json")["resolution"])
+    features = light_refit.pooled_features(net, frames[:12])
+    with torch.no_grad():
+        fused = net.light_decoder.fuse(features)
+        whole = net.predict_light(net.encode(data.to_tensor(frames[:12]))[1])
+    assert torch.allclose(fused, whole, atol=1e-6)
+
+
+def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, tmp_path):
+    torch.set_num_threads(2)
+    out = tmp_path / "refit"
+    record = light_refit.refit(shipped_model, sim_data, out, steps=5, batch=8, lr=1e-3, colour=1.0, seed=0)
+    stages = contract.read(shipped_model / "model.json")["stages"]
+    for name, spec in stages.items():
+        same = (out / spec["file"]).read_bytes() == (shipped_model / spec["file"]).read_bytes()
+        assert same == (name != "light_decoder"), name
+    manifest = contract.read(out / "model.json")
+    assert manifest["training"]["light_refit"]["steps"] == 5
+    assert max(manifest["parity"].values()) < 1e-4
+    assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr"}
