@@ -1,6 +1,6 @@
 //! Two pieces of work at once, one on another thread: what lets the element
 //! use both cores of a small machine on one frame (the denoising beside the
-//! network, a frame's planes or halves side by side).
+//! network, the two halves of a frame or of the denoising's areas side by side).
 
 use std::sync::Mutex;
 

@@ -159,9 +159,10 @@ const SMOOTH_ROWS: usize = MOTION_RADIUS + 1;
 const EDGE_ROWS: usize = MOTION_RADIUS + SPLIT_RADIUS;
 
 /// Samples of the areas of a frame's channels from which each area is walked
-/// in two halves, on two threads. Walked at a few nanoseconds a sample, fewer
-/// take less time than a thread's start (about 84 µs here) saves.
-const SPLIT_FROM: usize = 32_768;
+/// in two halves, on two threads. A sample takes about 3 ns; splitting saves
+/// half the walk and costs a thread's start (about 84 µs here), so it pays
+/// from about 56,000 samples.
+const SPLIT_FROM: usize = 65_536;
 
 /// What a walk over a channel's area does with each row once its motion is
 /// known.
@@ -329,7 +330,7 @@ impl DetailDenoiser {
                 let (top_detail, bottom_detail) = detail.split_at_mut(mid * area[2]);
                 let [top_seen, bottom_seen] = seen;
                 let [top_edges, bottom_edges] = &*edges;
-                top.push(Band {
+                top.push(ChannelRows {
                     lane,
                     area: *area,
                     rows: 0..mid,
@@ -339,7 +340,7 @@ impl DetailDenoiser {
                     walk,
                 });
                 if mid < h {
-                    bottom.push(Band {
+                    bottom.push(ChannelRows {
                         lane,
                         area: *area,
                         rows: mid..h,
@@ -356,14 +357,14 @@ impl DetailDenoiser {
                 data: top_data,
                 data_row: 0,
                 plane,
-                bands: top,
+                channels: top,
             });
             if !bottom.is_empty() {
                 bottoms.push(Half {
                     data: bottom_data,
                     data_row: y0 + mid,
                     plane,
-                    bands: bottom,
+                    channels: bottom,
                 });
             }
         }
@@ -588,11 +589,11 @@ struct Half<'a> {
     data: &'a mut [u8],
     data_row: usize,
     plane: PlaneView,
-    bands: Vec<Band<'a>>,
+    channels: Vec<ChannelRows<'a>>,
 }
 
 /// One channel's rows of a [`Half`], with what its walk reads and keeps.
-struct Band<'a> {
+struct ChannelRows<'a> {
     /// The channel's byte in a sample.
     lane: usize,
     /// The channel's whole area, and the rows of it walked.
@@ -602,13 +603,14 @@ struct Band<'a> {
     detail: &'a mut [i16],
     /// What the walk reads beyond `rows`.
     edges: &'a Edges,
-    /// The local mean squared differences the walk saw, by band.
+    /// The local mean squared differences the walk saw, by band of the
+    /// smooth value.
     seen: &'a mut [Vec<f32>; BANDS],
     walk: Walk,
 }
 
 impl Half<'_> {
-    /// Walks each band in turn, working in `s`.
+    /// Walks each channel's rows in turn, working in `s`.
     fn walk(self, disc: &Disc, s: &mut Scratch) {
         // AVX2, where the CPU has it, doubles the vectors' width of the loops
         // over a row, with the same results: both builds run the same IEEE
@@ -635,26 +637,17 @@ impl Half<'_> {
             data,
             data_row,
             plane,
-            bands,
+            channels,
         } = self;
-        for mut band in bands {
-            band.walk(data, data_row, &plane, disc, s);
+        for mut rows in channels {
+            rows.walk(data, data_row, &plane, disc, s);
         }
     }
 }
 
-impl Band<'_> {
-    // The steps, per sample, in the operations (and their order) of the
-    // plain denoiser in the tests, which works on whole maps: the smooth
-    // value, the mean of the 5 × 5 samples round it; the detail, the sample
-    // less it; its difference from the filtered detail of the frame before,
-    // squared (0 where there is none); their 3 × 3 mean, the motion; then,
-    // with the noise's level learnt from the frames before, the share of the
-    // new detail taken. A row is filtered and written once the squared
-    // differences of the row below it are known; the motion of the band's
-    // rows, sampled every `step`th sample of the area, goes to `seen`.
-    /// Walks the band's rows once, in order, doing its `walk` with each
-    /// once its motion is known. `data` holds the plane from row `data_row`.
+impl ChannelRows<'_> {
+    /// Walks the rows once, in order, doing the `walk` with each once its
+    /// motion is known. `data` holds the plane from row `data_row`.
     #[inline(always)]
     fn walk(
         &mut self,
@@ -664,6 +657,16 @@ impl Band<'_> {
         disc: &Disc,
         s: &mut Scratch,
     ) {
+        // The steps, per sample, in the operations (and their order) of the
+        // plain denoiser in the tests, which works on whole maps: the smooth
+        // value, the mean of the 5 × 5 samples round it; the detail, the
+        // sample less it; its difference from the filtered detail of the
+        // frame before, squared (0 where there is none); their 3 × 3 mean, the
+        // motion; then, with the noise's level learnt from the frames before,
+        // the share of the new detail taken. A row is filtered and written
+        // once the squared differences of the row below it are known; the
+        // motion of the rows, sampled every `step`th sample of the area, goes
+        // to `seen`.
         let [x0, _, w, h] = self.area;
         s.bytes.resize(SPLIT_SPAN * w, 0);
         for buffer in s.smooth.iter_mut().chain(&mut s.squared) {
@@ -682,7 +685,7 @@ impl Band<'_> {
         let step = (w * h / NOISE_SAMPLES).max(3);
         self.seen.iter_mut().for_each(Vec::clear);
         let Range { start, end } = self.rows;
-        // The first row whose squared differences the band's motion needs.
+        // The first row whose squared differences the rows' motion needs.
         let first = start.saturating_sub(MOTION_RADIUS);
         for y in first.saturating_sub(SPLIT_RADIUS)..(first + SPLIT_RADIUS).min(h) {
             self.read_row(y, data, data_row, plane, s);
@@ -745,7 +748,7 @@ impl Band<'_> {
         }
     }
 
-    /// Does the band's walk with row `y` of the area: filtering, with the
+    /// Does the `walk` with row `y` of the area: filtering, with the
     /// motion in `s.motion`, writes what `disc` shows of the row into the
     /// channel's byte of `data`, the plane from row `data_row`.
     #[inline(always)]

@@ -217,6 +217,22 @@ def training_data(run: Path, data_root: Path) -> str:
     )
 
 
+def pairing_summary(run: Path) -> dict | None:
+    """The run's training pairs from its pairing record (``lsyd.train`` writes it): the rule's
+    threshold, the pairs, and the share of them the simulator's truth confirms (``precision``)."""
+    path = run / "pairing.json"
+    if not path.exists():
+        return None
+    record = json.loads(path.read_text())
+    sessions = record["sessions"]
+    pairs = sum(x["pairs"] for x in sessions)
+    return {
+        "max_keypoint_distance": record["rule"]["max_keypoint_distance"],
+        "pairs": pairs,
+        "precision": sum(x["pairs"] * x["precision"] for x in sessions) / max(pairs, 1),
+    }
+
+
 def machine_record(run: Path) -> list[dict]:
     """Which machine trained which steps (``lsyd.train`` writes it)."""
     path = run / "machine.json"
@@ -243,6 +259,7 @@ def main() -> None:
         "pairs": cfg.pairs,
         "losses": dataclasses.asdict(cfg.weights),
         "data": training_data(a.run, a.data),
+        "pairing": pairing_summary(a.run),
         "machine": machine_record(a.run),
     }
     metrics = json.loads(a.metrics.read_text()) if a.metrics else {}

@@ -9,14 +9,16 @@ and unknown-source relighting gets the light's strength but not its hue. Here ev
 stays as it is, bit for bit, so relighting with the source light known does not change; only
 the light decoder learns, from the model's own encoder features of every captured frame (the
 second feature of levels 1-3, max-pooled as the decoder pools them, computed once), against
-the frame's monitor light. The loss is the monitor loss of training (``lsyd.train``): L1, its
-gradient L1, and L1 between the mean colours, this last at ``--colour``.
+the frame's monitor light. The loss is the monitor loss of training (``lsyd.train``) on the
+source light: L1, its gradient L1, and L1 between the mean colours, this last at ``--colour``
+(training's cycle term needs the relit image, which a frozen network does not change).
 
-The captures are the training data (``deskstage captures``); the validation set chooses
-nothing here but is scored before and after, so the held-out set stays unseen until the model
-card measures it. The output folder is a whole model: the other stages copied, the light decoder
-re-exported and checked against PyTorch like any export, the manifest's training record
-extended with the refit's.
+The captures are the training data (``deskstage captures``); the validation set is scored
+before and after, and one of its frames traces the export, so the held-out set stays unseen
+until the model card measures it. The output folder is a whole model: the other stages copied,
+the light decoder re-exported and checked against PyTorch like any export, the manifest's
+training record extended with the refit's, and its held-out metrics dropped (they were the old
+light decoder's; ``lsyd.evaluation.modelcard`` measures them again).
 """
 
 from __future__ import annotations
@@ -72,7 +74,7 @@ def agreement(pred: np.ndarray, true: np.ndarray) -> dict[str, float]:
     }
 
 
-def test_set(held: data.Heldout, resolution: int) -> tuple[np.ndarray, np.ndarray]:
+def frames_and_lights(held: data.Heldout, resolution: int) -> tuple[np.ndarray, np.ndarray]:
     """A test set's frames at network resolution and, per frame, its monitor light."""
     n_pose, n_light = held.images.shape[:2]
     frames = held.images.reshape(n_pose * n_light, *held.images.shape[2:])
@@ -81,28 +83,29 @@ def test_set(held: data.Heldout, resolution: int) -> tuple[np.ndarray, np.ndarra
 
 
 def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: float, colour: float, seed: int) -> dict:
+    if out.resolve() == model.resolve() or model.resolve().is_relative_to(out.resolve()):
+        raise SystemExit(f"--out {out} would replace the model it refits; choose another folder")
     torch.manual_seed(seed)
     net = network_from_model(model)
     resolution = contract.read(model / "model.json")["resolution"]
     sessions = data.capture_dirs(data_root / "captures")
-    if not sessions:
-        raise SystemExit(f"{data_root / 'captures'}: no capture sessions (deskstage captures --out it)")
+    validation = data.Heldout.load(data_root / "validation")
     t0 = time.time()
     frames = [data.session_frames(s, resolution) for s in sessions]
     images = np.concatenate([f[0] for f in frames])
     lights = torch.from_numpy(np.concatenate([f[1] for f in frames]))
     features = pooled_features(net, images)
-    val_images, val_lights = test_set(data.Heldout.load(data_root / "validation"), resolution)
+    val_images, val_lights = frames_and_lights(validation, resolution)
     val_features = pooled_features(net, val_images)
     print(f"{len(images)} frames of {len(sessions)} sessions encoded in {time.time() - t0:.0f} s")
 
     fuse = net.light_decoder.fuse
 
-    def validation() -> dict[str, float]:
+    def score_validation() -> dict[str, float]:
         with torch.no_grad():
             return agreement(fuse(val_features).numpy(), val_lights)
 
-    before = validation()
+    before = score_validation()
     opt = torch.optim.Adam(fuse.parameters(), lr=lr)
     sampler = torch.Generator().manual_seed(seed + 1)
     start = time.time()
@@ -116,17 +119,16 @@ def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: f
         loss.backward()
         opt.step()
     seconds = time.time() - start
-    after = validation()
-    net.eval()
+    after = score_validation()
 
     # The other stages as they were; the light decoder written anew and the whole chain checked.
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(model, out)
     specs = contract.stage_specs(resolution, contract.read(model / "model.json")["widths"])
-    held = data.Heldout.load(data_root / "heldout")
-    image = data.to_tensor(data.area_resize(held.images[0, 0], resolution))[None]
-    ref = reference_run(net, image, torch.from_numpy(held.lights[0])[None], torch.from_numpy(held.lights[4])[None])
+    image = data.to_tensor(data.area_resize(validation.images[0, 0], resolution))[None]
+    lights = [torch.from_numpy(validation.lights[i])[None] for i in (0, 4)]
+    ref = reference_run(net, image, *lights)
     write_stages(net, {"light_decoder": specs["light_decoder"]}, out, ref)
     checked = parity(out, specs, ref)
     record = {
@@ -145,6 +147,7 @@ def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: f
     }
     manifest = contract.read(out / "model.json")
     manifest["training"]["light_refit"] = record
+    manifest.get("metrics", {}).pop("heldout", None)
     manifest["parity"].update(checked)  # other stages (presence) keep their own
     contract.write(out / "model.json", manifest)
     return record

@@ -13,7 +13,7 @@ use super::{
 pub struct ReferenceChannel {
     area: [usize; 4],
     pub detail: Vec<i16>,
-    noise: [Option<f32>; BANDS],
+    pub noise: [Option<f32>; BANDS],
 }
 
 #[derive(Default)]

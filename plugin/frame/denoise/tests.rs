@@ -298,8 +298,11 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
     // Every format, sizes odd and even, a face that moves, grows, leaves the
     // frame's edge, fades, disappears and comes back, and a reset: the fast
     // denoiser must match the plain one's bytes exactly, and its filtered
-    // detail, which carries into every later frame. Walked whole on one
-    // thread, and split in halves on two, down to areas of two rows.
+    // detail and noise level, which carry into every later frame. Walked
+    // whole on one thread, and split in halves on two, down to faces so small
+    // that an area is a few rows and the rows copied beyond a half reach
+    // past the area's edge.
+    let mut fewest_rows = usize::MAX;
     for (format, split_from) in FORMATS.into_iter().flat_map(|f| [(f, SPLIT_FROM), (f, 0)]) {
         for size in [(96, 64), (75, 53)] {
             let mut fast = DetailDenoiser {
@@ -317,9 +320,9 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
                     pa.0.copy_from_slice(&pb.0);
                 }
                 let crop = Crop {
-                    x: [10, 10, 12, 0, 40, 60, 2][i % 7],
-                    y: [8, 8, 9, 0, 20, 30, 4][i % 7],
-                    size: [40, 40, 44, 64, 50, 36, 20][i % 7],
+                    x: [10, 10, 12, 0, 40, 60, 2, 30, 70][i % 9],
+                    y: [8, 8, 9, 0, 20, 30, 4, 20, 40][i % 9],
+                    size: [40, 40, 44, 64, 50, 36, 20, 4, 3][i % 9],
                 };
                 let strength = [1.0, 1.0, 0.7, 1.0, 0.0, 1.0, 0.3, 1.0][i % 8];
                 if i == 17 {
@@ -336,12 +339,19 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
                 }
                 assert_eq!(fast.channels.len(), plain.channels.len());
                 for (k, (f, p)) in fast.channels.iter().zip(&plain.channels).enumerate() {
+                    if f.area[3] > 0 {
+                        fewest_rows = fewest_rows.min(f.area[3]);
+                    }
                     assert!(
-                        f.detail == p.detail,
-                        "{format:?} {size:?} split from {split_from}: frame {i} channel {k}: detail"
+                        f.detail == p.detail && f.noise == p.noise,
+                        "{format:?} {size:?} split from {split_from}: frame {i} channel {k}: detail or noise"
                     );
                 }
             }
         }
     }
+    assert!(
+        fewest_rows <= EDGE_ROWS,
+        "the smallest area has {fewest_rows} rows: no half's copied rows reached past its edge"
+    );
 }

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from .. import contract, data
+from .. import contract, data, export
 from ..model import PAPER_WIDTHS
 from ..runs import LossWeights, TrainConfig, hardware, read_config
 from . import ROOT, benchmark, metrics
@@ -93,9 +93,9 @@ def measure(model: Path, held: data.Heldout, data_root: Path) -> dict:
     }
 
 
-def data_lines(data_root: Path, run: Path | None, recorded: str) -> list[str]:
+def data_lines(data_root: Path, run: Path | None, training: dict) -> list[str]:
     """What the model trained on, from the captures' metadata and the run's pairing record (or,
-    without the run, the line the export ``recorded``)."""
+    without the run, what the export recorded of it in the manifest's ``training``)."""
     metas = [json.loads(p.read_text()) for p in sorted((data_root / "captures").glob("*/meta.json"))]
     if not metas:
         return [f"- Captures: not found under {data_root}/captures."]
@@ -109,20 +109,16 @@ def data_lines(data_root: Path, run: Path | None, recorded: str) -> list[str]:
         "playing scenes, pans, fades, text pages, solid colours, moving bright patches and environment maps "
         "(`deskstage all --out data`).",
     ]
-    pairing_path = run / "pairing.json" if run else None
-    if not (pairing_path and pairing_path.exists()):
-        lines.append(f"- Training data as the export recorded it: {recorded}.")
-    else:
-        record = json.loads(pairing_path.read_text())
-        sessions = record["sessions"]
-        pairs = sum(x["pairs"] for x in sessions)
-        precision = sum(x["pairs"] * x["precision"] for x in sessions) / max(pairs, 1)
+    pairing = (export.pairing_summary(run) if run else None) or training.get("pairing")
+    if pairing:
         lines.append(
             "- Training pairs found by facial keypoints within each session, as on real captures (`lsyd.pairing`, "
-            f"threshold {record['rule']['max_keypoint_distance']:g} of the inter-ocular distance): {pairs:,} ordered "
-            f"pairs, {100 * precision:.1f}% of them within 2 degrees, 5 mm and 0.1 expression of the same pose by "
-            "the simulator's truth."
+            f"threshold {pairing['max_keypoint_distance']:g} of the inter-ocular distance): {pairing['pairs']:,} "
+            f"ordered pairs, {100 * pairing['precision']:.1f}% of them within 2 degrees, 5 mm and 0.1 expression of "
+            "the same pose by the simulator's truth."
         )
+    else:
+        lines.append(f"- Training data as the export recorded it: {training.get('data', 'not recorded')}.")
     lines.append(
         "- Never seen in training: the held-out set's 9 poses, 9 lights and outfit, the validation set, and the "
         "test recordings."
@@ -194,7 +190,7 @@ def card(model: Path, run: Path | None, data_root: Path) -> str:
         "",
         "## Data",
         "",
-        *data_lines(data_root, run, m["training"].get("data", "not recorded")),
+        *data_lines(data_root, run, m["training"]),
         "",
         "## Configuration",
         "",
