@@ -38,3 +38,14 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
 def test_a_refit_never_replaces_the_model_it_refits(sim_data, shipped_model):
     with pytest.raises(SystemExit, match="would replace the model"):
         light_refit.refit(shipped_model, sim_data, shipped_model, steps=1, batch=8, lr=1e-3, colour=1.0, seed=0)
+
+
+def test_the_card_tells_the_refit_and_the_training_from_the_manifest_alone(sim_data, shipped_model):
+    # The run folder is not shipped: the card reads what the export and the refit recorded.
+    from lsyd.evaluation import modelcard
+
+    text = modelcard.card(shipped_model, None, sim_data)
+    training = contract.read(shipped_model / "model.json")["training"]
+    assert f"- Training: {training['steps']} steps of batch {training['batch']}" in text
+    assert "Light decoder refitted on the frozen encoder" in text
+    assert "follows the screen's colour as well as its brightness" in text
