@@ -31,7 +31,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 from tqdm import tqdm
 
 from . import contract, data, losses
@@ -48,19 +47,8 @@ def pooled_features(net, images: np.ndarray) -> torch.Tensor:
     with torch.no_grad():
         for i in range(0, len(images), ENCODE_BATCH):
             _, feats = net.encode(data.to_tensor(images[i : i + ENCODE_BATCH]))
-            out.append(
-                torch.cat([F.max_pool2d(feats[1], 8), F.max_pool2d(feats[3], 4), F.max_pool2d(feats[5], 2)], dim=1)
-            )
+            out.append(net.light_decoder.pool(feats[1], feats[3], feats[5]))
     return torch.cat(out)
-
-
-def monitor_loss(pred: torch.Tensor, light: torch.Tensor, colour: float) -> torch.Tensor:
-    """The training's monitor loss on the source light (``lsyd.train``), colour at ``colour``."""
-    return (
-        F.l1_loss(pred, light)
-        + losses.light_perceptual(pred, light)
-        + colour * F.l1_loss(pred.mean(dim=(2, 3)), light.mean(dim=(2, 3)))
-    )
 
 
 def agreement(pred: np.ndarray, true: np.ndarray) -> dict[str, float]:
@@ -114,7 +102,7 @@ def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: f
         for g in opt.param_groups:
             g["lr"] = lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * step / steps)))
         idx = torch.randint(len(features), (batch,), generator=sampler)
-        loss = monitor_loss(fuse(features[idx]), lights[idx], colour)
+        loss = losses.monitor_match(fuse(features[idx]), lights[idx], 1.0, 1.0, colour)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()

@@ -70,6 +70,16 @@ def light_perceptual(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return dx + dy
 
 
+def monitor_match(pred: torch.Tensor, light: torch.Tensor, l1: float, perceptual: float, colour: float) -> torch.Tensor:
+    """How far a predicted monitor light is from the true one: L1, the gradient L1 as its
+    perceptual term, and L1 between the two screens' mean colours, each at its weight."""
+    return (
+        l1 * F.l1_loss(pred, light)
+        + perceptual * light_perceptual(pred, light)
+        + colour * F.l1_loss(pred.mean(dim=(2, 3)), light.mean(dim=(2, 3)))
+    )
+
+
 def standardised_distance(a: list[torch.Tensor], b: list[torch.Tensor]) -> torch.Tensor:
     """Mean over feature levels of the RMS difference of paired features (a[i] against
     b[i], each (N, C, H, W)), each channel in units of its standard deviation over both.

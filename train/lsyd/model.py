@@ -135,9 +135,13 @@ class LightDecoder(nn.Module):
         _, c1, c2, c3, c4 = w
         self.fuse = ConfidenceLight(c1 + c2 + c3, max(64, c4))
 
+    @staticmethod
+    def pool(e2: torch.Tensor, e4: torch.Tensor, e6: torch.Tensor) -> torch.Tensor:
+        """The three features max-pooled to the bottleneck's size and stacked: what ``fuse`` reads."""
+        return torch.cat([F.max_pool2d(e2, 8), F.max_pool2d(e4, 4), F.max_pool2d(e6, 2)], dim=1)
+
     def forward(self, e2: torch.Tensor, e4: torch.Tensor, e6: torch.Tensor) -> torch.Tensor:
-        pooled = torch.cat([F.max_pool2d(e2, 8), F.max_pool2d(e4, 4), F.max_pool2d(e6, 2)], dim=1)
-        return self.fuse(pooled)
+        return self.fuse(self.pool(e2, e4, e6))
 
 
 def up(x: torch.Tensor) -> torch.Tensor:

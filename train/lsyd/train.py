@@ -115,12 +115,9 @@ class Trainer:
             + w.adversarial * terms["adversarial"]
         )
         if pred_src is not None:
-            terms["monitor"] = (
-                w.l1 * F.l1_loss(pred_src, l_src)
-                + w.perceptual * losses.light_perceptual(pred_src, l_src)
-                + w.cycle * F.l1_loss(pred_tgt, l_tgt)
-                + w.monitor_colour * F.l1_loss(pred_src.mean(dim=(2, 3)), l_src.mean(dim=(2, 3)))
-            )
+            terms["monitor"] = losses.monitor_match(
+                pred_src, l_src, w.l1, w.perceptual, w.monitor_colour
+            ) + w.cycle * F.l1_loss(pred_tgt, l_tgt)
             g_loss = g_loss + w.monitor * terms["monitor"]
         if w.delit_consistency:
             delit = self.net.delit_image(torch.cat([src, tgt]), torch.cat([l_src, l_tgt]))

@@ -1,6 +1,8 @@
 """The light decoder's refit: it trains the very function the light decoder stage runs, and
 writes a model whose other stages are the original's, byte for byte."""
 
+import shutil
+
 import pytest
 import torch
 
@@ -35,9 +37,13 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
     assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr"}
 
 
-def test_a_refit_never_replaces_the_model_it_refits(sim_data, shipped_model):
+def test_a_refit_never_replaces_the_model_it_refits(sim_data, shipped_model, tmp_path):
+    # On a copy: should the guard break, the test must not take the shipped model with it.
+    model = tmp_path / "model"
+    shutil.copytree(shipped_model, model)
     with pytest.raises(SystemExit, match="would replace the model"):
-        light_refit.refit(shipped_model, sim_data, shipped_model, steps=1, batch=8, lr=1e-3, colour=1.0, seed=0)
+        light_refit.refit(model, sim_data, model, steps=1, batch=8, lr=1e-3, colour=1.0, seed=0)
+    assert (model / "model.json").exists()
 
 
 def test_the_card_tells_the_refit_and_the_training_from_the_manifest_alone(sim_data, shipped_model):
