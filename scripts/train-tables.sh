@@ -10,7 +10,9 @@
 # With CUDA the runs train at once, one process each: the networks are small, so one run
 # leaves a GPU mostly idle. On a CPU they train one after another. Each run resumes from its
 # checkpoint if interrupted. PYTHON picks the interpreter (default .venv/bin/python).
-# Score them with lsyd.evaluation.evaluate (README, "The paper's tables").
+# Score them with lsyd.evaluation.evaluate (README, "The paper's tables"). The runs without light
+# prediction get their light decoder afterwards: lsyd.light_refit --run (README, "Light prediction
+# fitted after training").
 set -euo pipefail
 cd "$(dirname "$0")/.."
 steps=$1
@@ -29,6 +31,7 @@ declare -A variant=(
   [t-nopred]="--no-light-prediction"
   [t-neither]="--no-delight --no-light-prediction"
   [e-lcfn]="--delit-consistency 0.1 --monitor-colour 1.0"
+  [e-nopred]="--no-light-prediction --delit-consistency 0.1"
 )
 shift $(($# < 3 ? $# : 3))
 names=("$@")

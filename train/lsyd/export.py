@@ -24,7 +24,7 @@ from onnx import numpy_helper
 from torch import nn
 
 from . import contract, data, model, optimise
-from .runs import load_network
+from .runs import LIGHT_FIT_RECORD, load_network
 
 PARITY_TOLERANCE = 1e-4
 OPSET = 17
@@ -262,6 +262,9 @@ def main() -> None:
         "pairing": pairing_summary(a.run),
         "machine": machine_record(a.run),
     }
+    fitted = a.run / LIGHT_FIT_RECORD
+    if fitted.exists():
+        training["light_refit"] = json.loads(fitted.read_text())
     metrics = json.loads(a.metrics.read_text()) if a.metrics else {}
     m = contract.manifest(a.name or a.out.name, cfg.net.resolution, cfg.net.widths, "fp32", training, metrics)
     m["parity"] = result["parity"]

@@ -2,6 +2,7 @@
 the screen's colour as well as its brightness.
 
     python -m lsyd.light_refit --model ../models/default --data ../data --out ../target/refit
+    python -m lsyd.light_refit --run ../runs/t-nopred --data ../data --out ../runs/t-nopred-fitted
 
 Trained jointly with the rest of the network, the light decoder learns the screen's brightness
 but not its colour (README, "Beyond the paper": colour correlation 0.01 on the held-out set),
@@ -19,11 +20,19 @@ until the model card measures it. The output folder is a whole model: the other 
 the light decoder re-exported and checked against PyTorch like any export, the manifest's
 training record extended with the refit's, and its held-out metrics dropped (they were the old
 light decoder's; ``lsyd.evaluation.modelcard`` measures them again).
+
+With ``--run``, the same fit completes a training run: one trained without light prediction
+(``lsyd.train --no-light-prediction``) gets a fresh light decoder, learnt on its frozen encoder
+in the same way. Trained jointly, the monitor loss costs known-source accuracy (README, Table
+3); trained after, it costs none. The output is a run folder (its configuration with light
+prediction on, its checkpoint, its records, and ``light_fit.json``) that the export and the
+evaluation read as any other run.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import shutil
 import time
@@ -33,8 +42,9 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from . import contract, data, losses
+from . import contract, data, losses, model
 from .export import network_from_model, parity, reference_run, write_stages
+from .runs import LIGHT_FIT_RECORD, load_network
 
 # Frames encoded at a time when the features are computed.
 ENCODE_BATCH = 128
@@ -70,12 +80,23 @@ def frames_and_lights(held: data.Heldout, resolution: int) -> tuple[np.ndarray, 
     return data.resize_frames(frames, resolution), lights
 
 
-def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: float, colour: float, seed: int) -> dict:
-    if out.resolve() == model.resolve() or model.resolve().is_relative_to(out.resolve()):
-        raise SystemExit(f"--out {out} would replace the model it refits; choose another folder")
-    torch.manual_seed(seed)
-    net = network_from_model(model)
-    resolution = contract.read(model / "model.json")["resolution"]
+@dataclasses.dataclass(frozen=True)
+class FitSettings:
+    """How the light decoder learns: steps of Adam at ``lr`` with cosine decay to a tenth, over
+    batches of ``batch`` frames, the monitor loss's mean-colour term at ``colour``."""
+
+    steps: int = 4000
+    batch: int = 64
+    lr: float = 1e-3
+    colour: float = 1.0
+    seed: int = 0
+
+
+def fit(net: model.LcfnNet, data_root: Path, resolution: int, settings: FitSettings) -> dict:
+    """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
+    captured frame against the frame's monitor light; returns the fit's record, with the
+    validation set's scores before and after."""
+    torch.manual_seed(settings.seed)
     sessions = data.capture_dirs(data_root / "captures")
     validation = data.Heldout.load(data_root / "validation")
     t0 = time.time()
@@ -94,46 +115,50 @@ def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: f
             return agreement(fuse(val_features).numpy(), val_lights)
 
     before = score_validation()
-    opt = torch.optim.Adam(fuse.parameters(), lr=lr)
-    sampler = torch.Generator().manual_seed(seed + 1)
+    opt = torch.optim.Adam(fuse.parameters(), lr=settings.lr)
+    sampler = torch.Generator().manual_seed(settings.seed + 1)
     start = time.time()
-    for step in tqdm(range(steps), desc="light decoder", unit="step"):
+    for step in tqdm(range(settings.steps), desc="light decoder", unit="step"):
         # Cosine decay to a tenth, as in training.
         for g in opt.param_groups:
-            g["lr"] = lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * step / steps)))
-        idx = torch.randint(len(features), (batch,), generator=sampler)
-        loss = losses.monitor_match(fuse(features[idx]), lights[idx], 1.0, 1.0, colour)
+            g["lr"] = settings.lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * step / settings.steps)))
+        idx = torch.randint(len(features), (settings.batch,), generator=sampler)
+        loss = losses.monitor_match(fuse(features[idx]), lights[idx], 1.0, 1.0, settings.colour)
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
-    seconds = time.time() - start
-    after = score_validation()
+    return {
+        "stage": "light_decoder",
+        "encoder": "frozen",
+        "frames": len(images),
+        "sessions": len(sessions),
+        **dataclasses.asdict(settings),
+        "seconds": round(time.time() - start, 1),
+        "validation_before": before,
+        "validation_after": score_validation(),
+    }
 
-    # The other stages as they were; the light decoder written anew and the whole chain checked.
+
+def refit(model_dir: Path, data_root: Path, out: Path, settings: FitSettings) -> dict:
+    """Refits an exported model's light decoder and writes the model to ``out``: the other
+    stages copied, the light decoder re-exported and the whole chain checked."""
+    if out.resolve() == model_dir.resolve() or model_dir.resolve().is_relative_to(out.resolve()):
+        raise SystemExit(f"--out {out} would replace the model it refits; choose another folder")
+    net = network_from_model(model_dir)
+    manifest = contract.read(model_dir / "model.json")
+    resolution = manifest["resolution"]
+    record = fit(net, data_root, resolution, settings)
+
     if out.exists():
         shutil.rmtree(out)
-    shutil.copytree(model, out)
-    specs = contract.stage_specs(resolution, contract.read(model / "model.json")["widths"])
+    shutil.copytree(model_dir, out)
+    specs = contract.stage_specs(resolution, manifest["widths"])
+    validation = data.Heldout.load(data_root / "validation")
     image = data.to_tensor(data.area_resize(validation.images[0, 0], resolution))[None]
     lights = [torch.from_numpy(validation.lights[i])[None] for i in (0, 4)]
     ref = reference_run(net, image, *lights)
     write_stages(net, {"light_decoder": specs["light_decoder"]}, out, ref)
     checked = parity(out, specs, ref)
-    record = {
-        "stage": "light_decoder",
-        "encoder": "frozen",
-        "frames": len(images),
-        "sessions": len(sessions),
-        "steps": steps,
-        "batch": batch,
-        "lr": lr,
-        "colour": colour,
-        "seed": seed,
-        "seconds": round(seconds, 1),
-        "validation_before": before,
-        "validation_after": after,
-    }
-    manifest = contract.read(out / "model.json")
     manifest["training"]["light_refit"] = record
     manifest.get("metrics", {}).pop("heldout", None)
     manifest["parity"].update(checked)  # other stages (presence) keep their own
@@ -141,11 +166,47 @@ def refit(model: Path, data_root: Path, out: Path, steps: int, batch: int, lr: f
     return record
 
 
+# What ``fit_after`` copies of the run it starts from: the records the export reads.
+RUN_RECORDS = ("pairing.json", "machine.json", "log.csv")
+
+
+def fit_after(run: Path, data_root: Path, out: Path, settings: FitSettings) -> dict:
+    """Gives a run trained without light prediction (``lsyd.train --no-light-prediction``) a
+    light decoder fitted on its frozen encoder (or refits the one it has), and writes the result
+    as a run folder at ``out`` that the export and the evaluation read as any other."""
+    if out.resolve() == run.resolve():
+        raise SystemExit(f"--out {out} would replace the run it starts from; choose another folder")
+    trained, cfg = load_network(run)
+    net_cfg = dataclasses.replace(cfg.net, light_prediction=True)
+    torch.manual_seed(settings.seed)  # a fresh light decoder's initial weights
+    net = model.build(net_cfg).eval()
+    missing, unexpected = net.load_state_dict(trained.state_dict(), strict=False)
+    if unexpected or any(not k.startswith("light_decoder.") for k in missing):
+        raise SystemExit(f"{run}: not an LCFN network this fit can complete ({missing=}, {unexpected=})")
+    record = fit(net, data_root, net_cfg.resolution, settings)
+    record["start"] = "fresh" if missing else "as trained"
+
+    out.mkdir(parents=True, exist_ok=True)
+    checkpoint = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    torch.save({"net": net.state_dict(), "step": checkpoint["step"]}, out / "checkpoint.pt")
+    (out / "config.json").write_text(json.dumps(dataclasses.replace(cfg, net=net_cfg).to_json(), indent=2) + "\n")
+    for name in RUN_RECORDS:
+        if (run / name).exists():
+            shutil.copy2(run / name, out / name)
+    (out / LIGHT_FIT_RECORD).write_text(json.dumps({"run": run.name, **record}, indent=2) + "\n")
+    (out / "done").touch()
+    return record
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", type=Path, required=True, help="the model folder whose light decoder is refitted")
+    what = p.add_mutually_exclusive_group(required=True)
+    what.add_argument("--model", type=Path, help="the model folder whose light decoder is refitted")
+    what.add_argument(
+        "--run", type=Path, help="a training run (say one without light prediction) given a light decoder fitted after"
+    )
     p.add_argument("--data", type=Path, default=Path("data"), help="captures, validation and held-out sets")
-    p.add_argument("--out", type=Path, required=True, help="the refitted model's folder (replaced)")
+    p.add_argument("--out", type=Path, required=True, help="the refitted model's folder (replaced), or the run's")
     p.add_argument("--steps", type=int, default=4000)
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--lr", type=float, default=1e-3)
@@ -155,7 +216,8 @@ def main() -> None:
     a = p.parse_args()
     if a.threads:
         torch.set_num_threads(a.threads)
-    record = refit(a.model, a.data, a.out, a.steps, a.batch, a.lr, a.colour, a.seed)
+    settings = FitSettings(steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, seed=a.seed)
+    record = refit(a.model, a.data, a.out, settings) if a.model else fit_after(a.run, a.data, a.out, settings)
     print(json.dumps(record, indent=2))
 
 

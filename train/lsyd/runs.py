@@ -1,7 +1,9 @@
 """A training run's folder, as ``lsyd.train`` writes it and export and evaluation read it:
 the configuration it was trained with (``config.json``: ``TrainConfig``, with the loss
 weights ``LossWeights``), its trained network (``checkpoint.pt``), and ``hardware``, the
-name of a machine as run records and model cards give it.
+name of a machine as run records and model cards give it. A run whose light decoder was fitted
+after training (``lsyd.light_refit --run``) also holds that fit's record (``LIGHT_FIT_RECORD``),
+which the export carries into the model's manifest.
 
 A saved network (``network.pt``) is a trained generator on its own, what fine-tuning starts
 from (``lsyd.train --init``, ``lsydrelight train --from``). It is a ``torch.save`` dict of
@@ -28,6 +30,8 @@ from pathlib import Path
 import torch
 
 from . import model, pairing
+
+LIGHT_FIT_RECORD = "light_fit.json"
 
 
 @dataclasses.dataclass(frozen=True)

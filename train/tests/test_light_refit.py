@@ -1,12 +1,17 @@
 """The light decoder's refit: it trains the very function the light decoder stage runs, and
-writes a model whose other stages are the original's, byte for byte."""
+writes a model whose other stages are the original's, byte for byte; fitted after training, it
+completes a run trained without light prediction."""
 
+import json
 import shutil
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 import torch
 
-from lsyd import contract, data, light_refit
+from lsyd import contract, data, light_refit, model, runs
 from lsyd.export import network_from_model
 
 
@@ -24,7 +29,7 @@ def test_the_refit_trains_what_the_light_decoder_stage_runs(sim_data, shipped_mo
 def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, tmp_path):
     torch.set_num_threads(2)
     out = tmp_path / "refit"
-    record = light_refit.refit(shipped_model, sim_data, out, steps=5, batch=8, lr=1e-3, colour=1.0, seed=0)
+    record = light_refit.refit(shipped_model, sim_data, out, light_refit.FitSettings(steps=5, batch=8))
     stages = contract.read(shipped_model / "model.json")["stages"]
     for name, spec in stages.items():
         same = (out / spec["file"]).read_bytes() == (shipped_model / spec["file"]).read_bytes()
@@ -42,7 +47,7 @@ def test_a_refit_never_replaces_the_model_it_refits(sim_data, shipped_model, tmp
     model = tmp_path / "model"
     shutil.copytree(shipped_model, model)
     with pytest.raises(SystemExit, match="would replace the model"):
-        light_refit.refit(model, sim_data, model, steps=1, batch=8, lr=1e-3, colour=1.0, seed=0)
+        light_refit.refit(model, sim_data, model, light_refit.FitSettings(steps=1, batch=8))
     assert (model / "model.json").exists()
 
 
@@ -55,3 +60,45 @@ def test_the_card_tells_the_refit_and_the_training_from_the_manifest_alone(sim_d
     assert f"- Training: {training['steps']} steps of batch {training['batch']}" in text
     assert "Light decoder refitted on the frozen encoder" in text
     assert "follows the screen's colour as well as its brightness" in text
+
+
+def test_a_run_trained_without_light_prediction_gets_a_light_decoder_fitted_after(sim_data, tmp_path):
+    torch.set_num_threads(2)
+    trained_cfg = runs.TrainConfig(net=model.NetConfig(resolution=32, width=0.125, light_prediction=False), steps=7)
+    trained = model.build(trained_cfg.net)
+    run = tmp_path / "no-prediction"
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps(trained_cfg.to_json()))
+    torch.save({"net": trained.state_dict(), "step": 7}, run / "checkpoint.pt")
+
+    out = tmp_path / "fitted"
+    record = light_refit.fit_after(run, sim_data, out, light_refit.FitSettings(steps=3, batch=4))
+    assert record["start"] == "fresh"
+    net, cfg = runs.load_network(out)
+    assert cfg.net.light_prediction and cfg.steps == 7
+    # Everything but the new light decoder is the run's, weight for weight.
+    fitted = net.state_dict()
+    for name, value in trained.state_dict().items():
+        assert torch.equal(fitted[name], value), name
+    assert any(name.startswith("light_decoder.") for name in fitted)
+
+    # The export takes it as any run, and records the fit in the manifest's training record.
+    exported = tmp_path / "model"
+    subprocess.run(
+        [sys.executable, "-m", "lsyd.export", "--run", str(out), "--data", str(sim_data), "--out", str(exported)],
+        check=True,
+        cwd=Path(__file__).resolve().parents[1],
+    )
+    manifest = contract.read(exported / "model.json")
+    assert manifest["training"]["light_refit"]["start"] == "fresh"
+    assert manifest["training"]["light_refit"]["steps"] == 3
+    # Its card says the network trained without the monitor loss and got its light decoder after.
+    from lsyd.evaluation import modelcard
+
+    card = "\n".join(modelcard.configuration_lines(manifest, None))
+    assert "no monitor loss" in card and "Light decoder fitted after training" in card
+
+
+def test_a_fit_never_replaces_the_run_it_starts_from(sim_data, tmp_path):
+    with pytest.raises(SystemExit, match="would replace the run"):
+        light_refit.fit_after(tmp_path, sim_data, tmp_path, light_refit.FitSettings(steps=1))

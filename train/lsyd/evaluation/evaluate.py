@@ -3,6 +3,7 @@
     python -m lsyd.evaluation.evaluate --data data --out results/paper \\
         --ours runs/t-lcfn --sun runs/t-sun --sengupta runs/t-sengupta \\
         [--no-delight runs/t-nodelight] [--no-prediction runs/t-nopred] [--neither runs/t-neither]
+    python -m lsyd.evaluation.evaluate --data data --out results/fitted --ours runs/t-nopred-fitted --held-out-only
 
 - Table 1: relighting the held-out set (9 poses x 9 lights; every ordered pair of
   lights of a pose, 648 relightings over the paper's 324 pairs), ours with and
@@ -15,7 +16,8 @@
   lit, so smoothing them smooths the light as well).
 - Table 3: ablation of LCFN de-lighting and of source-light prediction.
 
-Outputs ``<out>.md``, ``<out>.json`` and a bar chart ``<out>.png``. Relit crops
+A row whose run is not given is left out; ``--held-out-only`` leaves Table 2 out (most of
+the time). Outputs ``<out>.md``, ``<out>.json`` and a bar chart ``<out>.png``. Relit crops
 are put back at the held-out set's full 256 x 256 with the element's transfer
 (``metrics.transfer``); recordings are scored at network resolution.
 """
@@ -124,10 +126,12 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--data", type=Path, default=Path("data"))
     p.add_argument("--out", type=Path, default=Path("results/paper"))
-    for name in ("ours", "sun", "sengupta"):
-        p.add_argument(f"--{name}", type=Path, required=True)
+    p.add_argument("--ours", type=Path, required=True)
+    for name in ("sun", "sengupta"):
+        p.add_argument(f"--{name}", type=Path, default=None, help="a baseline; its rows are left out without it")
     for name in ("no-delight", "no-prediction", "neither"):
         p.add_argument(f"--{name}", type=Path, default=None, help="a Table 3 cell; its row is left out without it")
+    p.add_argument("--held-out-only", action="store_true", help="Tables 1 and 3 only, not the recordings' Table 2")
     p.add_argument("--threads", type=int, default=0)
     a = p.parse_args()
     if a.threads:
@@ -147,12 +151,12 @@ def main() -> None:
         return heldout_scores(net, cfg, held, known)
 
     ours_known = held_row("ours", True)
-    results["table1"] = {
-        "Sun et al. 2019 (source predicted)": held_row("sun", True),
-        "Ours, source predicted": held_row("ours", False),
-        "Sengupta et al. 2021 (source given)": held_row("sengupta", True),
-        "Ours, source given": ours_known,
-    }
+    if "sun" in nets:
+        results["table1"]["Sun et al. 2019 (source predicted)"] = held_row("sun", True)
+    results["table1"]["Ours, source predicted"] = held_row("ours", False)
+    if "sengupta" in nets:
+        results["table1"]["Sengupta et al. 2021 (source given)"] = held_row("sengupta", True)
+    results["table1"]["Ours, source given"] = ours_known
     if "neither" in nets:
         results["table3"]["no prediction, no de-lighting"] = held_row("neither", True)
     if "no-delight" in nets:
@@ -171,14 +175,18 @@ def main() -> None:
         return crops[r]
 
     ours, cfg = nets["ours"]
-    rows2 = {
-        "Sun et al. 2019": dict(net=nets["sun"][0], cfg=nets["sun"][1], alpha=1.0, beta=0.6, frames=1, known=True),
-        "Sengupta et al. 2021": dict(
-            net=nets["sengupta"][0], cfg=nets["sengupta"][1], alpha=1.0, beta=0.6, frames=1, known=True
-        ),
-        "Sengupta et al. 2021 + L_src avg": dict(
-            net=nets["sengupta"][0], cfg=nets["sengupta"][1], alpha=1.0, beta=0.6, frames=3, known=True
-        ),
+    rows2 = {}
+    if "sun" in nets:
+        rows2["Sun et al. 2019"] = dict(
+            net=nets["sun"][0], cfg=nets["sun"][1], alpha=1.0, beta=0.6, frames=1, known=True
+        )
+    if "sengupta" in nets:
+        sengupta, sengupta_cfg = nets["sengupta"]
+        rows2["Sengupta et al. 2021"] = dict(net=sengupta, cfg=sengupta_cfg, alpha=1.0, beta=0.6, frames=1, known=True)
+        rows2["Sengupta et al. 2021 + L_src avg"] = dict(
+            net=sengupta, cfg=sengupta_cfg, alpha=1.0, beta=0.6, frames=3, known=True
+        )
+    rows2 |= {
         "Ours (base)": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=1, known=True),
         "Ours + L_src avg": dict(net=ours, cfg=cfg, alpha=1.0, beta=0.6, frames=3, known=True),
         "Ours + LCFN smoothing": dict(net=ours, cfg=cfg, alpha=0.7, beta=0.6, frames=1, known=True),
@@ -191,7 +199,7 @@ def main() -> None:
         rows2["No LCFN + L_src avg + skip smoothing"] = dict(
             net=plain, cfg=plain_cfg, alpha=0.7, beta=0.6, frames=3, known=True
         )
-    for name, kw in rows2.items():
+    for name, kw in ({} if a.held_out_only else rows2).items():
         print(f"recordings: {name}", flush=True)
         results["table2"][name] = mean_over(recordings(kw["cfg"]), **kw)
 

@@ -143,6 +143,9 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
     res, widths = m["resolution"], list(m["widths"])
     lr = cfg.lr if cfg else t.get("lr")
     lr = f"lr {lr:g}, " if lr else ""
+    refit = t.get("light_refit")
+    # A run trained without light prediction whose light decoder was fitted after it.
+    fitted_after = bool(refit) and refit.get("start") == "fresh"
     lines = [
         f"- Architecture: the paper's LCFN U-Net at {res} x {res}, widths {widths} "
         f"({widths[1] / PAPER_WIDTHS[1]:g} of the paper's 32-64-128-256-512), light codes of {m['code_dim']}.",
@@ -150,9 +153,14 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
         f"on {machine_line(t.get('machine', []))} (`scripts/train-all.sh`).",
         f"- Losses (paper eqs. 3-6): L1 x{w.l1:g}; perceptual x{w.perceptual:g}, an offline stand-in "
         "(Laplacian-pyramid L1 plus 0.5 (1 - SSIM); ImageNet networks cannot be downloaded here); "
-        f"cycle x{w.cycle:g}; LSGAN PatchGAN x{w.adversarial:g}; monitor loss x{w.monitor:g} (L1, gradient L1 "
-        "as its perceptual term, and cycle on the target light). "
-        f"{100 * w.unknown_source:.0f}% of steps de-light with the predicted source light.",
+        f"cycle x{w.cycle:g}; LSGAN PatchGAN x{w.adversarial:g}; "
+        + (
+            "no monitor loss: the network trained without its light decoder (`--no-light-prediction`), "
+            "which was fitted afterwards (below)."
+            if fitted_after
+            else f"monitor loss x{w.monitor:g} (L1, gradient L1 as its perceptual term, and cycle on the target "
+            f"light). {100 * w.unknown_source:.0f}% of steps de-light with the predicted source light."
+        ),
     ]
     if w.delit_consistency or w.monitor_colour:
         lines.append(
@@ -162,11 +170,11 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
             f"x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true screens' "
             "mean colours."
         )
-    refit = t.get("light_refit")
     if refit:
         before, after = refit["validation_before"], refit["validation_after"]
+        how = "fitted after training" if fitted_after else "refitted"
         lines.append(
-            f"- Light decoder refitted on the frozen encoder (`lsyd.light_refit`): {refit['steps']} steps of batch "
+            f"- Light decoder {how} on the frozen encoder (`lsyd.light_refit`): {refit['steps']} steps of batch "
             f"{refit['batch']} over the {refit['frames']:,} captured frames' features, Adam (lr {refit['lr']:g}, "
             f"cosine to a tenth), monitor colour x{refit['colour']:g}, in {refit['seconds'] / 60:.0f} minutes; "
             "every other stage as trained. On the validation set its colour correlation went from "
