@@ -366,16 +366,28 @@ fn both_builds_of_the_inner_loops_agree() {
     let mut noise = Noise(0xa1b2);
     let n = 1000 + 7;
     let mut map = |lo, hi| -> Vec<f32> { (0..n).map(|_| noise.uniform(lo, hi)).collect() };
-    let (top, mut bottom) = (map(0.0, MAX_GAIN), map(0.0, MAX_GAIN));
+    let (mut top, mut bottom) = (map(0.0, MAX_GAIN), map(0.0, MAX_GAIN));
     bottom[5] = f32::NAN;
     bottom[17] = f32::INFINITY;
-    let dither: Vec<f32> = (0..n).map(|x| dither(x, 1)).collect();
+    bottom[20] = -0.0;
+    top[9] = f32::NEG_INFINITY;
+    let mut dither: Vec<f32> = (0..n).map(|x| dither(x, 1)).collect();
+    dither[3] = f32::NAN;
+    dither[12] = -0.5;
     let row: Vec<u8> = (0..n).map(|_| noise.byte()).collect();
     let (mut chosen, mut portable) = (row.clone(), row.clone());
     gain_row(&mut chosen, 0.3, (&top, &bottom), 1.7, &dither);
     gain_row_portable(&mut portable, 0.3, (&top, &bottom), 1.7, &dither);
     assert_eq!(chosen, portable);
     assert_ne!(chosen, row);
+    // Every value exactly half a level above a whole one: rounded away from zero.
+    let (ones, halves) = (vec![1.0; n], vec![0.5; n]);
+    let (mut chosen, mut portable) = (row.clone(), row.clone());
+    gain_row(&mut chosen, 0.3, (&ones, &ones), 0.0, &halves);
+    gain_row_portable(&mut portable, 0.3, (&ones, &ones), 0.0, &halves);
+    assert_eq!(chosen, portable);
+    let up: Vec<u8> = row.iter().map(|&b| b.saturating_add(1)).collect();
+    assert_eq!(chosen, up);
 
     // The chroma change of a YUV row.
     let mut map = |lo, hi| -> Vec<f32> { (0..n).map(|_| noise.uniform(lo, hi)).collect() };
