@@ -21,12 +21,12 @@ the light decoder re-exported and checked against PyTorch like any export, the m
 training record extended with the refit's, and its held-out metrics dropped (they were the old
 light decoder's; ``lsyd.evaluation.modelcard`` measures them again).
 
-With ``--run``, the same fit completes a training run: one trained without light prediction
-(``lsyd.train --no-light-prediction``) gets a fresh light decoder, learnt on its frozen encoder
-in the same way. Trained jointly, the monitor loss costs known-source accuracy (README, Table
-3); trained after, it costs none. The output is a run folder (its configuration with light
-prediction on, its checkpoint, its records, and ``light_fit.json``) that the export and the
-evaluation read as any other run.
+With ``--run``, the same fit completes a finished training run: one trained without light
+prediction (``lsyd.train --no-light-prediction``) gets a fresh light decoder, learnt on its
+frozen encoder in the same way. Trained jointly, light prediction costs known-source accuracy
+(README, Table 3); fitted after, it costs none, as the relighting stages are the run's. The
+output is a run folder (its configuration with light prediction on, its checkpoint, its
+records, and ``light_fit.json``) that the export and the evaluation read as any other run.
 """
 
 from __future__ import annotations
@@ -95,8 +95,8 @@ class FitSettings:
 def fit(net: model.LcfnNet, data_root: Path, resolution: int, settings: FitSettings) -> dict:
     """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
     captured frame against the frame's monitor light; returns the fit's record, with the
-    validation set's scores before and after."""
-    torch.manual_seed(settings.seed)
+    validation set's scores before and after. Its batches are drawn from their own generator,
+    seeded by ``settings.seed``."""
     sessions = data.capture_dirs(data_root / "captures")
     validation = data.Heldout.load(data_root / "validation")
     t0 = time.time()
@@ -171,25 +171,41 @@ RUN_RECORDS = ("pairing.json", "machine.json", "log.csv")
 
 
 def fit_after(run: Path, data_root: Path, out: Path, settings: FitSettings) -> dict:
-    """Gives a run trained without light prediction (``lsyd.train --no-light-prediction``) a
-    light decoder fitted on its frozen encoder (or refits the one it has), and writes the result
-    as a run folder at ``out`` that the export and the evaluation read as any other."""
-    if out.resolve() == run.resolve():
+    """Gives a finished LCFN run trained without light prediction (``lsyd.train
+    --no-light-prediction``) a light decoder fitted on its frozen encoder (or refits the one it
+    has), and writes the result as a run folder at ``out`` (replaced) that the export and the
+    evaluation read as any other."""
+    if out.resolve() == run.resolve() or run.resolve().is_relative_to(out.resolve()):
         raise SystemExit(f"--out {out} would replace the run it starts from; choose another folder")
     trained, cfg = load_network(run)
+    if cfg.net.arch != "lcfn":
+        raise SystemExit(f"{run}: a {cfg.net.arch} run; only the LCFN network has a light decoder to fit")
+    checkpoint = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    if checkpoint["step"] < cfg.steps:
+        raise SystemExit(
+            f"{run}: trained {checkpoint['step']} of its {cfg.steps} steps; finish it first (lsyd.train --resume)"
+        )
     net_cfg = dataclasses.replace(cfg.net, light_prediction=True)
-    torch.manual_seed(settings.seed)  # a fresh light decoder's initial weights
-    net = model.build(net_cfg).eval()
+    with torch.random.fork_rng():
+        torch.manual_seed(settings.seed)  # a fresh light decoder's initial weights
+        net = model.build(net_cfg).eval()
     missing, unexpected = net.load_state_dict(trained.state_dict(), strict=False)
     if unexpected or any(not k.startswith("light_decoder.") for k in missing):
         raise SystemExit(f"{run}: not an LCFN network this fit can complete ({missing=}, {unexpected=})")
     record = fit(net, data_root, net_cfg.resolution, settings)
     record["start"] = "fresh" if missing else "as trained"
 
-    out.mkdir(parents=True, exist_ok=True)
-    checkpoint = torch.load(run / "checkpoint.pt", map_location="cpu", weights_only=False)
+    if out.exists():
+        shutil.rmtree(out)
+    out.mkdir(parents=True)
     torch.save({"net": net.state_dict(), "step": checkpoint["step"]}, out / "checkpoint.pt")
-    (out / "config.json").write_text(json.dumps(dataclasses.replace(cfg, net=net_cfg).to_json(), indent=2) + "\n")
+    weights = cfg.weights
+    if missing:
+        # The network trained without light prediction: no monitor loss, no steps de-lit with
+        # a predicted light, whatever the configuration's weights said.
+        weights = dataclasses.replace(weights, monitor=0.0, unknown_source=0.0, monitor_colour=0.0)
+    fitted_cfg = dataclasses.replace(cfg, net=net_cfg, weights=weights)
+    (out / "config.json").write_text(json.dumps(fitted_cfg.to_json(), indent=2) + "\n")
     for name in RUN_RECORDS:
         if (run / name).exists():
             shutil.copy2(run / name, out / name)

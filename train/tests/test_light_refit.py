@@ -62,25 +62,38 @@ def test_the_card_tells_the_refit_and_the_training_from_the_manifest_alone(sim_d
     assert "follows the screen's colour as well as its brightness" in text
 
 
+def no_prediction_run(folder: Path, steps_done: int = 7, arch: str = "lcfn") -> tuple[Path, torch.nn.Module]:
+    """A run folder of a tiny network trained without light prediction for 7 steps, of which
+    ``steps_done`` are in its checkpoint."""
+    net_cfg = model.NetConfig(arch=arch, resolution=32, width=0.125, light_prediction=False)
+    trained = model.build(net_cfg)
+    folder.mkdir()
+    weights = runs.LossWeights(delit_consistency=0.1)
+    (folder / "config.json").write_text(json.dumps(runs.TrainConfig(net=net_cfg, steps=7, weights=weights).to_json()))
+    torch.save({"net": trained.state_dict(), "step": steps_done}, folder / "checkpoint.pt")
+    return folder, trained
+
+
 def test_a_run_trained_without_light_prediction_gets_a_light_decoder_fitted_after(sim_data, tmp_path):
     torch.set_num_threads(2)
-    trained_cfg = runs.TrainConfig(net=model.NetConfig(resolution=32, width=0.125, light_prediction=False), steps=7)
-    trained = model.build(trained_cfg.net)
-    run = tmp_path / "no-prediction"
-    run.mkdir()
-    (run / "config.json").write_text(json.dumps(trained_cfg.to_json()))
-    torch.save({"net": trained.state_dict(), "step": 7}, run / "checkpoint.pt")
-
+    run, trained = no_prediction_run(tmp_path / "no-prediction")
     out = tmp_path / "fitted"
-    record = light_refit.fit_after(run, sim_data, out, light_refit.FitSettings(steps=3, batch=4))
+    settings = light_refit.FitSettings(steps=3, batch=4)
+    record = light_refit.fit_after(run, sim_data, out, settings)
     assert record["start"] == "fresh"
     net, cfg = runs.load_network(out)
     assert cfg.net.light_prediction and cfg.steps == 7
-    # Everything but the new light decoder is the run's, weight for weight.
+    # It trained without the monitor loss, whatever its weights said; the fitted run says so.
+    assert cfg.weights.monitor == 0.0 and cfg.weights.unknown_source == 0.0
+    # Everything but the new light decoder is the run's, weight for weight; the light decoder
+    # has learnt from its fresh start.
     fitted = net.state_dict()
     for name, value in trained.state_dict().items():
         assert torch.equal(fitted[name], value), name
-    assert any(name.startswith("light_decoder.") for name in fitted)
+    torch.manual_seed(settings.seed)
+    fresh = model.build(cfg.net).state_dict()
+    decoder = [name for name in fitted if name.startswith("light_decoder.")]
+    assert decoder and any(not torch.equal(fitted[name], fresh[name]) for name in decoder)
 
     # The export takes it as any run, and records the fit in the manifest's training record.
     exported = tmp_path / "model"
@@ -97,8 +110,19 @@ def test_a_run_trained_without_light_prediction_gets_a_light_decoder_fitted_afte
 
     card = "\n".join(modelcard.configuration_lines(manifest, None))
     assert "no monitor loss" in card and "Light decoder fitted after training" in card
+    assert "de-lit consistency x0.1" in card and "monitor colour x0 " not in card
 
 
-def test_a_fit_never_replaces_the_run_it_starts_from(sim_data, tmp_path):
+def test_a_fit_after_refuses_what_it_cannot_complete(sim_data, tmp_path):
+    settings = light_refit.FitSettings(steps=1)
+    run, _ = no_prediction_run(tmp_path / "unfinished", steps_done=3)
+    with pytest.raises(SystemExit, match="trained 3 of its 7 steps"):
+        light_refit.fit_after(run, sim_data, tmp_path / "out", settings)
+    baseline, _ = no_prediction_run(tmp_path / "sun", arch="sun")
+    with pytest.raises(SystemExit, match="only the LCFN network"):
+        light_refit.fit_after(baseline, sim_data, tmp_path / "out", settings)
     with pytest.raises(SystemExit, match="would replace the run"):
-        light_refit.fit_after(tmp_path, sim_data, tmp_path, light_refit.FitSettings(steps=1))
+        light_refit.fit_after(run, sim_data, run, settings)
+    with pytest.raises(SystemExit, match="would replace the run"):
+        light_refit.fit_after(run, sim_data, tmp_path, settings)
+    assert not (tmp_path / "out").exists()

@@ -162,13 +162,22 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
             f"light). {100 * w.unknown_source:.0f}% of steps de-light with the predicted source light."
         ),
     ]
-    if w.delit_consistency or w.monitor_colour:
+    added = []
+    if w.delit_consistency:
+        added.append(
+            f"de-lit consistency x{w.delit_consistency:g}, the standardised distance between the de-lit "
+            "features of a pair's two images, each de-lit with its own light"
+        )
+    if w.monitor_colour:
+        added.append(
+            f"monitor colour x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true "
+            "screens' mean colours"
+        )
+    if added:
         lines.append(
             "- Added to the paper's losses (each off in the tables' runs; README, \"Beyond the paper\"): "
-            f"de-lit consistency x{w.delit_consistency:g}, the standardised distance between the de-lit "
-            "features of a pair's two images, each de-lit with its own light; monitor colour "
-            f"x{w.monitor_colour:g} inside the monitor loss, L1 between the predicted and true screens' "
-            "mean colours."
+            + "; ".join(added)
+            + "."
         )
     if refit:
         before, after = refit["validation_before"], refit["validation_after"]
