@@ -92,13 +92,12 @@ class FitSettings:
     seed: int = 0
 
 
-def fit(net: model.LcfnNet, data_root: Path, resolution: int, settings: FitSettings) -> dict:
+def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolution: int, settings: FitSettings) -> dict:
     """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
     captured frame against the frame's monitor light; returns the fit's record, with the
-    validation set's scores before and after. Its batches are drawn from their own generator,
+    ``validation`` set's scores before and after. Its batches are drawn from their own generator,
     seeded by ``settings.seed``."""
     sessions = data.capture_dirs(data_root / "captures")
-    validation = data.Heldout.load(data_root / "validation")
     t0 = time.time()
     frames = [data.session_frames(s, resolution) for s in sessions]
     images = np.concatenate([f[0] for f in frames])
@@ -147,13 +146,13 @@ def refit(model_dir: Path, data_root: Path, out: Path, settings: FitSettings) ->
     net = network_from_model(model_dir)
     manifest = contract.read(model_dir / "model.json")
     resolution = manifest["resolution"]
-    record = fit(net, data_root, resolution, settings)
+    validation = data.Heldout.load(data_root / "validation")
+    record = fit(net, data_root, validation, resolution, settings)
 
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(model_dir, out)
     specs = contract.stage_specs(resolution, manifest["widths"])
-    validation = data.Heldout.load(data_root / "validation")
     image = data.to_tensor(data.area_resize(validation.images[0, 0], resolution))[None]
     lights = [torch.from_numpy(validation.lights[i])[None] for i in (0, 4)]
     ref = reference_run(net, image, *lights)
@@ -192,7 +191,8 @@ def fit_after(run: Path, data_root: Path, out: Path, settings: FitSettings) -> d
     missing, unexpected = net.load_state_dict(trained.state_dict(), strict=False)
     if unexpected or any(not k.startswith("light_decoder.") for k in missing):
         raise SystemExit(f"{run}: not an LCFN network this fit can complete ({missing=}, {unexpected=})")
-    record = fit(net, data_root, net_cfg.resolution, settings)
+    validation = data.Heldout.load(data_root / "validation")
+    record = fit(net, data_root, validation, net_cfg.resolution, settings)
     record["start"] = "fresh" if missing else "as trained"
 
     if out.exists():
