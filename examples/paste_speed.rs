@@ -12,6 +12,10 @@
 //! cargo run --release --example paste_speed -- [--rounds 41]
 //! ```
 //!
+//! Last, it times what the crop, the paste and the denoising pay to split
+//! their work between two threads (`parallel::beside` with nothing to do),
+//! which sets the sizes from which they split.
+//!
 //! Each round times every size and format once, in turn, so a busy machine
 //! slows all of them alike rather than whichever ran at that moment. Every
 //! frame is larger than the caches together or follows others that are, so the
@@ -22,6 +26,7 @@ use std::time::Instant;
 use gstlsydrelight::frame::{
     Crop, DetailDenoiser, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
 };
+use gstlsydrelight::parallel::beside;
 
 const SIZES: [(&str, usize, usize); 4] = [
     ("480p", 854, 480),
@@ -64,6 +69,9 @@ struct Case {
     paste_ms: Vec<f64>,
 }
 
+/// Times `parallel::beside` taken with nothing to do, per round.
+const THREAD_STARTS: usize = 50;
+
 /// "median (min-max)" of a list of times.
 fn summary(times: &mut [f64]) -> String {
     times.sort_by(f64::total_cmp);
@@ -91,6 +99,7 @@ fn main() {
     }
 
     let mut cases: Vec<Case> = Vec::new();
+    let mut thread_ms = Vec::with_capacity(rounds * THREAD_STARTS);
     for (label, width, height) in SIZES {
         for format in FORMATS {
             let buffers = noisy_frame(format, width, height, cases.len() as u32 + 7);
@@ -142,6 +151,11 @@ fn main() {
                 .apply(&mut case.buffers.frame_mut(), case.crop, case.feather);
             case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
         }
+        for _ in 0..THREAD_STARTS {
+            let start = Instant::now();
+            std::hint::black_box(beside(|| std::hint::black_box(1), || 2));
+            thread_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        }
     }
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
@@ -159,4 +173,8 @@ fn main() {
             summary(&mut case.small_ms)
         );
     }
+    println!(
+        "a second thread's start and end (parallel::beside): {} ms",
+        summary(&mut thread_ms)
+    );
 }

@@ -21,7 +21,7 @@
 use std::fmt;
 use std::time::Instant;
 
-use crate::parallel::beside;
+use crate::parallel::beside_long;
 
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
@@ -530,7 +530,7 @@ impl FramePolicy {
         meanwhile: impl FnOnce() -> T + Send,
     ) -> (Result<Outcome<'_>, EngineError>, T, f64) {
         let (done, (outcome, finished)) =
-            beside(meanwhile, || (self.finish(pending), Instant::now()));
+            beside_long(meanwhile, || (self.finish(pending), Instant::now()));
         (outcome, done, finished.elapsed().as_secs_f64())
     }
 

@@ -33,8 +33,9 @@ const CELLS_PER_CROP: f32 = 16.0;
 /// centre a little above the face's).
 pub const INNER_RADIUS: f32 = 0.25;
 
-/// Frames of fewer rows are pasted on one thread: starting a second costs
-/// about 30 µs, half a 480p frame's paste.
+/// Frames of fewer rows are pasted on one thread: handing half to a second
+/// costs about 20 µs (`cargo run --release --example paste_speed`, its last
+/// line), a 20th of a 480p frame's paste.
 const SPLIT_HEIGHT: usize = 480;
 
 /// The `ε` of the gain applied to the frame, `(v' + ε) = g · (v + ε)`, in
@@ -371,15 +372,43 @@ impl Undithered {
         dx * dx + dy * dy < self.radius * self.radius
     }
 
-    /// The pixels at frame x `xs` (rising) of the row at frame y `y` that the
-    /// disc holds: the same test, pixel for pixel, as [`Undithered::holds`].
+    /// The pixels at frame x `xs` (rising, evenly spaced) of the row at frame
+    /// y `y` that the disc holds: the same test, pixel for pixel, as
+    /// [`Undithered::holds`]. Each end is first placed where the circle
+    /// crosses the row, then moved pixel by pixel until the test agrees: a
+    /// binary search per row, each step waiting on the last, cost more than
+    /// the rest of a packed row's setup.
     fn span(&self, xs: &[f32], y: f32) -> Range<usize> {
         let dy = y - self.centre[1];
-        let middle = xs.partition_point(|&x| x < self.centre[0]);
-        let first = xs[..middle].partition_point(|&x| !self.holds(x, dy));
-        let end = middle + xs[middle..].partition_point(|&x| self.holds(x, dy));
+        let reach = (self.radius * self.radius - dy * dy).max(0.0).sqrt();
+        let index = |x: f32| match xs {
+            [first, second, ..] => ((x - first) / (second - first)).max(0.0) as usize,
+            _ => 0,
+        };
+        let middle = settle(xs, 0..xs.len(), index(self.centre[0]), |x| {
+            x < self.centre[0]
+        });
+        let first = settle(xs, 0..middle, index(self.centre[0] - reach), |x| {
+            !self.holds(x, dy)
+        });
+        let end = settle(xs, middle..xs.len(), index(self.centre[0] + reach), |x| {
+            self.holds(x, dy)
+        });
         first..end.max(first)
     }
+}
+
+/// `within.start + xs[within].partition_point(pred)`, found by walking from
+/// `guess` (`pred` true for a prefix of `xs[within]`, false after it).
+fn settle(xs: &[f32], within: Range<usize>, guess: usize, pred: impl Fn(f32) -> bool) -> usize {
+    let mut at = guess.clamp(within.start, within.end);
+    while at > within.start && !pred(xs[at - 1]) {
+        at -= 1;
+    }
+    while at < within.end && pred(xs[at]) {
+        at += 1;
+    }
+    at
 }
 
 /// `within`, lanes of a row, split where `span` (lanes the disc holds)
@@ -484,26 +513,17 @@ pub(super) fn gain_row(
 #[target_feature(enable = "avx2")]
 fn gain_row_avx2(row: &mut [u8], ty: f32, gain: (&[f32], &[f32]), pivot: f32, dither: &[f32]) {
     use std::arch::x86_64::*;
-    const BLOCK: usize = 32;
-    const LANES: usize = 8;
-    const SHIFT: f32 = 8_388_608.0;
     let n = row.len();
     let (top, bottom, dither) = (&gain.0[..n], &gain.1[..n], &dither[..n]);
-    let whole = n - n % BLOCK;
+    let whole = n - n % avx2::BLOCK;
     let (uy, ty_v) = (_mm256_set1_ps(1.0 - ty), _mm256_set1_ps(ty));
     let pivot_v = _mm256_set1_ps(pivot);
-    let (zero, top_level) = (_mm256_setzero_ps(), _mm256_set1_ps(255.0));
-    let (shift, half) = (_mm256_set1_ps(SHIFT), _mm256_set1_ps(0.5));
-    let shift_bits = _mm256_set1_epi32(SHIFT.to_bits() as i32);
-    // The packs below work within each 128-bit half: this puts the 4-byte
-    // groups back in order.
-    let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
-    for k in (0..whole).step_by(BLOCK) {
-        let mut rounded = [_mm256_setzero_si256(); BLOCK / LANES];
+    for k in (0..whole).step_by(avx2::BLOCK) {
+        let mut rounded = [_mm256_setzero_si256(); avx2::BLOCK / avx2::LANES];
         for (j, out) in rounded.iter_mut().enumerate() {
-            let i = k + j * LANES;
+            let i = k + j * avx2::LANES;
             // SAFETY: i + LANES <= whole <= n, the length of every slice read.
-            unsafe {
+            *out = unsafe {
                 let load = |s: &[f32]| _mm256_loadu_ps(s.as_ptr().add(i));
                 let bytes = _mm_loadl_epi64(row.as_ptr().add(i).cast());
                 let v = _mm256_cvtepi32_ps(_mm256_cvtepu8_epi32(bytes));
@@ -512,28 +532,10 @@ fn gain_row_avx2(row: &mut [u8], ty: f32, gain: (&[f32], &[f32]), pivot: f32, di
                     _mm256_mul_ps(load(bottom), ty_v),
                 );
                 let relit = _mm256_sub_ps(_mm256_mul_ps(gain, _mm256_add_ps(v, pivot_v)), pivot_v);
-                let x = _mm256_add_ps(relit, load(dither));
-                // `round_to_u8`: max and min return their second operand for
-                // NaN, so NaN becomes 0 as there.
-                let c = _mm256_min_ps(_mm256_max_ps(x, zero), top_level);
-                let shifted = _mm256_add_ps(c, shift);
-                let tie = _mm256_cmp_ps::<_CMP_EQ_OQ>(
-                    _mm256_sub_ps(c, _mm256_sub_ps(shifted, shift)),
-                    half,
-                );
-                // The whole number in the sum's low bits, plus one at a tie
-                // (the comparison's all-ones lanes are −1).
-                let units = _mm256_sub_epi32(_mm256_castps_si256(shifted), shift_bits);
-                *out = _mm256_sub_epi32(units, _mm256_castps_si256(tie));
-            }
+                avx2::round_to_u8(_mm256_add_ps(relit, load(dither)))
+            };
         }
-        let words = [
-            _mm256_packus_epi32(rounded[0], rounded[1]),
-            _mm256_packus_epi32(rounded[2], rounded[3]),
-        ];
-        let bytes = _mm256_permutevar8x32_epi32(_mm256_packus_epi16(words[0], words[1]), order);
-        // SAFETY: k + BLOCK <= whole <= n.
-        unsafe { _mm256_storeu_si256(row.as_mut_ptr().add(k).cast(), bytes) };
+        avx2::store_bytes(&mut row[k..k + avx2::BLOCK], rounded);
     }
     let tail = whole..n;
     gain_row_portable(
@@ -543,6 +545,59 @@ fn gain_row_avx2(row: &mut [u8], ty: f32, gain: (&[f32], &[f32]), pivot: f32, di
         pivot,
         &dither[tail],
     )
+}
+
+/// The AVX2 pieces the paste's loops share: `round_to_u8` on 8 lanes, and 32
+/// of its results packed to bytes.
+#[cfg(target_arch = "x86_64")]
+pub(super) mod avx2 {
+    use std::arch::x86_64::*;
+
+    /// Samples a loop takes at a time: 32 bytes, one store.
+    pub(in crate::frame) const BLOCK: usize = 32;
+    /// f32 lanes of a vector.
+    pub(in crate::frame) const LANES: usize = 8;
+
+    /// `round_to_u8` of each lane, in the lane's low byte: the same
+    /// operations, so the same results (NaN to 0, ties away from zero).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(in crate::frame) fn round_to_u8(x: __m256) -> __m256i {
+        const SHIFT: f32 = 8_388_608.0;
+        let shift = _mm256_set1_ps(SHIFT);
+        // max and min return their second operand for NaN, so NaN becomes 0
+        // as there.
+        let c = _mm256_min_ps(_mm256_max_ps(x, _mm256_setzero_ps()), _mm256_set1_ps(255.0));
+        let shifted = _mm256_add_ps(c, shift);
+        let tie = _mm256_cmp_ps::<_CMP_EQ_OQ>(
+            _mm256_sub_ps(c, _mm256_sub_ps(shifted, shift)),
+            _mm256_set1_ps(0.5),
+        );
+        // The whole number in the sum's low bits, plus one at a tie (the
+        // comparison's all-ones lanes are −1).
+        let units = _mm256_sub_epi32(
+            _mm256_castps_si256(shifted),
+            _mm256_set1_epi32(SHIFT.to_bits() as i32),
+        );
+        _mm256_sub_epi32(units, _mm256_castps_si256(tie))
+    }
+
+    /// Four vectors of `round_to_u8` results, in order, into `out`'s 32 bytes.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(in crate::frame) fn store_bytes(out: &mut [u8], rounded: [__m256i; BLOCK / LANES]) {
+        assert_eq!(out.len(), BLOCK);
+        let words = [
+            _mm256_packus_epi32(rounded[0], rounded[1]),
+            _mm256_packus_epi32(rounded[2], rounded[3]),
+        ];
+        // The packs work within each 128-bit half: this puts the 4-byte
+        // groups back in order.
+        let order = _mm256_setr_epi32(0, 4, 1, 5, 2, 6, 3, 7);
+        let bytes = _mm256_permutevar8x32_epi32(_mm256_packus_epi16(words[0], words[1]), order);
+        // SAFETY: `out` holds 32 bytes, checked above.
+        unsafe { _mm256_storeu_si256(out.as_mut_ptr().cast(), bytes) };
+    }
 }
 
 // Always inlined, so that `gain_row_avx2` holds a copy built for AVX2.
@@ -593,4 +648,41 @@ fn dither_rows(first: usize, count: usize, lanes: usize) -> [Vec<f32>; DITHER] {
             .map(|lane| dither(first + lane / lanes, y))
             .collect()
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{Undithered, pixel_xs};
+
+    #[test]
+    fn the_undithered_span_is_every_pixel_the_disc_holds() {
+        // Discs inside the row, beyond either end, and of no size; rows
+        // through them, tangent to them and beyond them.
+        for (centre, radius) in [
+            ([50.3, 20.0], 13.7),
+            ([-5.0, 20.0], 9.0),
+            ([130.0, 20.0], 30.0),
+            ([40.0, 20.0], 0.0),
+        ] {
+            let disc = Undithered { centre, radius };
+            for (first, count, subsample) in
+                [(0, 60, 1), (7, 60, 1), (3, 40, 2), (9, 1, 2), (0, 0, 1)]
+            {
+                let xs = pixel_xs(first, count, subsample);
+                for y in -20..60 {
+                    let y = y as f32 + 0.5;
+                    let held: Vec<usize> = (0..count)
+                        .filter(|&i| disc.holds(xs[i], y - centre[1]))
+                        .collect();
+                    let span = disc.span(&xs, y);
+                    match (held.first(), held.last()) {
+                        (Some(&a), Some(&b)) => {
+                            assert_eq!(span, a..b + 1, "{centre:?} {radius} y {y}")
+                        }
+                        _ => assert!(span.is_empty(), "{centre:?} {radius} y {y}: {span:?}"),
+                    }
+                }
+            }
+        }
+    }
 }

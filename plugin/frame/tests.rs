@@ -1,6 +1,8 @@
 use super::*;
 use crate::frame::gain_field::INNER_RADIUS;
-use crate::frame::gain_field::yuv::{YuvChange, chroma_change, chroma_change_portable};
+use crate::frame::gain_field::yuv::{
+    YuvChange, chroma_change, chroma_change_portable, spread, spread_portable, write_lane,
+};
 use crate::frame::gain_field::{dither, gain_row, gain_row_portable};
 use crate::frame::reference;
 
@@ -308,6 +310,26 @@ fn crop_matches_the_reference_within_rounding() {
 }
 
 #[test]
+fn a_crop_split_between_threads_is_the_crop_on_one_bit_for_bit() {
+    let mut noise = Noise(0x5b1);
+    for format in FORMATS {
+        let buffers = random_frame(format, 1280, 720, &mut noise);
+        let frame = buffers.frame();
+        let crop = Crop::centred(1280, 720, 0.4, 0.5, 1.0);
+        assert!(crop.size >= SPLIT_CROP, "{crop:?} is not split");
+        // An odd resolution: the halves differ by a row.
+        for res in [96, 97] {
+            let (split, whole) = (
+                sample_crop(&frame, crop, res),
+                sample_crop_split(&frame, crop, res, res),
+            );
+            let bits = |v: &[f32]| -> Vec<u32> { v.iter().map(|x| x.to_bits()).collect() };
+            assert!(bits(&split) == bits(&whole), "{format:?} at {res}");
+        }
+    }
+}
+
+#[test]
 fn rounding_matches_f32_round() {
     let check = |x: f32| {
         let expected = x.round().clamp(0.0, 255.0) as u8;
@@ -410,14 +432,34 @@ fn both_builds_of_the_inner_loops_agree() {
     };
     assert_eq!(run(false), run(true));
 
+    // A luma row's chroma terms, doubled and dithered, with a short last block.
+    let mut terms = map(-40.0, 40.0);
+    terms.truncate(n.div_ceil(2));
+    let (mut chosen, mut portable) = (vec![0.0; n], vec![0.0; n]);
+    spread::<2>(&mut chosen, &terms, &dither);
+    spread_portable::<2>(&mut portable, &terms, &dither);
+    let bits = |v: &[f32]| -> Vec<u32> { v.iter().map(|x| x.to_bits()).collect() };
+    assert_eq!(bits(&chosen), bits(&portable));
+    assert_eq!(
+        chosen[n - 1].to_bits(),
+        (terms[n / 2] + dither[n - 1]).to_bits()
+    );
+    // A plane's own row of chroma, rounded: every value the rounding treats apart.
+    let mut values = map(-10.0, 270.0);
+    values[..6].copy_from_slice(&[f32::NAN, -0.0, 0.5, 1.5, f32::INFINITY, 254.5]);
+    let mut chosen = vec![0u8; n];
+    write_lane::<1>(&mut chosen, 0, &values);
+    let rounded: Vec<u8> = values.iter().map(|&v| round_to_u8(v)).collect();
+    assert_eq!(chosen, rounded);
+    assert_eq!(chosen[..6], [0, 0, 1, 2, 255, 255]);
+
     // Rows long enough for whole blocks and a tail.
     let rows: Vec<&[u8]> = row.chunks_exact(n / 3).collect();
     let weights = [0.25, 0.5, 0.25];
     let (mut chosen, mut portable) = (vec![0.0; n / 3], vec![0.0; n / 3]);
     weighted_sum(&mut chosen, &rows, &weights);
     weighted_sum_portable(&mut portable, &rows, &weights);
-    let bits = |v: Vec<f32>| -> Vec<u32> { v.into_iter().map(f32::to_bits).collect() };
-    assert_eq!(bits(chosen), bits(portable));
+    assert_eq!(bits(&chosen), bits(&portable));
 }
 
 // The change as a gain field over the frame.

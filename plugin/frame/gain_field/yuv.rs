@@ -100,10 +100,12 @@ impl FieldRow {
 }
 
 /// Mean of `count` luma bytes summing to `sum`: what a chroma sample's Cb and
-/// Cr change by.
+/// Cr change by. A chroma sample covers 1, 2 or 4 pixels, whose reciprocals
+/// are exact, so the product is the quotient, without a division per sample.
 #[inline(always)]
 fn block_mean(sum: u16, count: usize) -> f32 {
-    f32::from(sum) / count as f32
+    debug_assert!(matches!(count, 1 | 2 | 4), "{count} pixels a chroma sample");
+    f32::from(sum) * (1.0 / count as f32)
 }
 
 /// Adds each block of `SUB` bytes of a luma row (the last one may be short)
@@ -135,16 +137,93 @@ fn read_lane<const STEP: usize>(out: &mut [f32], row: &[u8], byte: usize) {
 
 /// `values`, rounded, into byte `byte` of each `STEP` bytes of `row`.
 #[inline(always)]
-fn write_lane<const STEP: usize>(row: &mut [u8], byte: usize, values: &[f32]) {
+pub(in crate::frame) fn write_lane<const STEP: usize>(row: &mut [u8], byte: usize, values: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if STEP == 1 && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { write_bytes_avx2(row, values) };
+    }
     for (sample, &v) in row.chunks_exact_mut(STEP).zip(values) {
         sample[byte] = round_to_u8(v);
+    }
+}
+
+/// `write_lane::<1>` 32 samples at a time: a plane of its own (I420's Cb and
+/// Cr) takes whole vectors, where the compiler stored each byte on its own.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn write_bytes_avx2(row: &mut [u8], values: &[f32]) {
+    use super::avx2::{BLOCK, LANES, round_to_u8, store_bytes};
+    use std::arch::x86_64::*;
+    let n = row.len().min(values.len());
+    let whole = n - n % BLOCK;
+    for k in (0..whole).step_by(BLOCK) {
+        let mut rounded = [_mm256_setzero_si256(); BLOCK / LANES];
+        for (j, out) in rounded.iter_mut().enumerate() {
+            // SAFETY: k + j * LANES + LANES <= whole <= values.len().
+            let v = unsafe { _mm256_loadu_ps(values.as_ptr().add(k + j * LANES)) };
+            *out = round_to_u8(v);
+        }
+        store_bytes(&mut row[k..k + BLOCK], rounded);
+    }
+    for (b, &v) in row[whole..n].iter_mut().zip(&values[whole..n]) {
+        *b = crate::frame::round_to_u8(v);
     }
 }
 
 /// Per pixel of a luma row, its chroma sample's term (`extra`, one a block of
 /// `SUB` pixels, the last block maybe short) plus its dither.
 #[inline(always)]
-fn spread<const SUB: usize>(out: &mut [f32], extra: &[f32], dither: &[f32]) {
+pub(in crate::frame) fn spread<const SUB: usize>(out: &mut [f32], extra: &[f32], dither: &[f32]) {
+    #[cfg(target_arch = "x86_64")]
+    if SUB == 2 && std::arch::is_x86_feature_detected!("avx2") {
+        // SAFETY: the CPU has AVX2, checked just above.
+        return unsafe { spread_pairs_avx2(out, extra, dither) };
+    }
+    spread_portable::<SUB>(out, extra, dither)
+}
+
+/// `spread::<2>` 16 pixels at a time: each of 8 terms doubled in the
+/// vectors, where the compiler's build shuffled element by element.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn spread_pairs_avx2(out: &mut [f32], extra: &[f32], dither: &[f32]) {
+    use std::arch::x86_64::*;
+    const PIXELS: usize = 16;
+    let len = out.len();
+    let whole = (len / PIXELS).min(extra.len() / (PIXELS / 2)) * PIXELS;
+    let dither = &dither[..len];
+    for k in (0..whole).step_by(PIXELS) {
+        // SAFETY: k + PIXELS <= whole <= len, the length of `out` and
+        // `dither`, and k / 2 + 8 <= extra.len().
+        unsafe {
+            let terms = _mm256_loadu_ps(extra.as_ptr().add(k / 2));
+            // (e0 e0 e1 e1 | e4 e4 e5 e5) and (e2 e2 e3 e3 | e6 e6 e7 e7).
+            let (low, high) = (
+                _mm256_unpacklo_ps(terms, terms),
+                _mm256_unpackhi_ps(terms, terms),
+            );
+            let pairs = [
+                _mm256_permute2f128_ps::<0x20>(low, high),
+                _mm256_permute2f128_ps::<0x31>(low, high),
+            ];
+            for (half, pair) in pairs.into_iter().enumerate() {
+                let at = k + half * 8;
+                let sum = _mm256_add_ps(pair, _mm256_loadu_ps(dither.as_ptr().add(at)));
+                _mm256_storeu_ps(out.as_mut_ptr().add(at), sum);
+            }
+        }
+    }
+    spread_portable::<2>(&mut out[whole..], &extra[whole / 2..], &dither[whole..]);
+}
+
+// Always inlined, so that the paste's AVX2 build holds a copy built for AVX2.
+#[inline(always)]
+pub(in crate::frame) fn spread_portable<const SUB: usize>(
+    out: &mut [f32],
+    extra: &[f32],
+    dither: &[f32],
+) {
     let (whole, len) = (out.len() / SUB, out.len());
     let (blocks, tail) = out.split_at_mut(whole * SUB);
     let (dither, tail_dither) = dither[..len].split_at(whole * SUB);
