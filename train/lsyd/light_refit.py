@@ -12,7 +12,10 @@ the light decoder learns, from the model's own encoder features of every capture
 second feature of levels 1-3, max-pooled as the decoder pools them, computed once), against
 the frame's monitor light. The loss is the monitor loss of training (``lsyd.train``) on the
 source light: L1, its gradient L1, and L1 between the mean colours, this last at ``--colour``
-(training's cycle term needs the relit image, which a frozen network does not change).
+(training's cycle term needs the relit image, which a frozen network does not change). With
+``--code``, a last term asks what relighting needs of the prediction: that the frozen light
+encoder give it the true light's code (the squared difference, each of the code's dimensions in
+units of its spread over the captures), as that code is what de-lights the features.
 
 The captures are the training data (``deskstage captures``); the validation set is scored
 before and after, and one of its frames traces the export, so the held-out set stays unseen
@@ -83,13 +86,31 @@ def frames_and_lights(held: data.Heldout, resolution: int) -> tuple[np.ndarray, 
 @dataclasses.dataclass(frozen=True)
 class FitSettings:
     """How the light decoder learns: steps of Adam at ``lr`` with cosine decay to a tenth, over
-    batches of ``batch`` frames, the monitor loss's mean-colour term at ``colour``."""
+    batches of ``batch`` frames, the monitor loss's mean-colour term at ``colour`` and the
+    light-code term at ``code``."""
 
     steps: int = 4000
     batch: int = 64
     lr: float = 1e-3
     colour: float = 1.0
+    code: float = 0.0
     seed: int = 0
+
+
+class CodeDistance:
+    """How far apart two lights are for the network: the mean squared difference of their codes
+    from ``net``'s frozen light encoder, each dimension in units of its standard deviation over
+    ``lights``, so that the weight does not depend on the code's scale."""
+
+    def __init__(self, net: model.LcfnNet, lights: torch.Tensor):
+        self.encode = net.light_encoder
+        with torch.no_grad():
+            self.spread = self.encode(lights).std(dim=0) + 1e-6
+
+    def __call__(self, pred: torch.Tensor, light: torch.Tensor) -> torch.Tensor:
+        with torch.no_grad():
+            target = self.encode(light)
+        return (((self.encode(pred) - target) / self.spread) ** 2).mean()
 
 
 def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolution: int, settings: FitSettings) -> dict:
@@ -108,10 +129,19 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
     print(f"{len(images)} frames of {len(sessions)} sessions encoded in {time.time() - t0:.0f} s")
 
     fuse = net.light_decoder.fuse
+    # Only the light decoder learns; the code term's gradient passes through the light encoder
+    # without collecting there.
+    for p in net.parameters():
+        p.requires_grad_(False)
+    for p in fuse.parameters():
+        p.requires_grad_(True)
+    code_distance = CodeDistance(net, lights)
 
     def score_validation() -> dict[str, float]:
         with torch.no_grad():
-            return agreement(fuse(val_features).numpy(), val_lights)
+            pred = fuse(val_features)
+            code_error = float(code_distance(pred, torch.from_numpy(val_lights)))
+            return {**agreement(pred.numpy(), val_lights), "code_error": code_error}
 
     before = score_validation()
     opt = torch.optim.Adam(fuse.parameters(), lr=settings.lr)
@@ -122,7 +152,10 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
         for g in opt.param_groups:
             g["lr"] = settings.lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * step / settings.steps)))
         idx = torch.randint(len(features), (settings.batch,), generator=sampler)
-        loss = losses.monitor_match(fuse(features[idx]), lights[idx], 1.0, 1.0, settings.colour)
+        pred = fuse(features[idx])
+        loss = losses.monitor_match(pred, lights[idx], 1.0, 1.0, settings.colour)
+        if settings.code:
+            loss = loss + settings.code * code_distance(pred, lights[idx])
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
@@ -227,12 +260,13 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=64)
     p.add_argument("--lr", type=float, default=1e-3)
     p.add_argument("--colour", type=float, default=1.0, help="weight of the mean colour's L1")
+    p.add_argument("--code", type=float, default=0.0, help="weight of the light code's standardised squared error")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
     a = p.parse_args()
     if a.threads:
         torch.set_num_threads(a.threads)
-    settings = FitSettings(steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, seed=a.seed)
+    settings = FitSettings(steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, code=a.code, seed=a.seed)
     record = refit(a.model, a.data, a.out, settings) if a.model else fit_after(a.run, a.data, a.out, settings)
     print(json.dumps(record, indent=2))
 

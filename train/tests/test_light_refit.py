@@ -29,7 +29,8 @@ def test_the_refit_trains_what_the_light_decoder_stage_runs(sim_data, shipped_mo
 def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, tmp_path):
     torch.set_num_threads(2)
     out = tmp_path / "refit"
-    record = light_refit.refit(shipped_model, sim_data, out, light_refit.FitSettings(steps=5, batch=8))
+    settings = light_refit.FitSettings(steps=5, batch=8, code=1.0)
+    record = light_refit.refit(shipped_model, sim_data, out, settings)
     stages = contract.read(shipped_model / "model.json")["stages"]
     for name, spec in stages.items():
         same = (out / spec["file"]).read_bytes() == (shipped_model / spec["file"]).read_bytes()
@@ -39,7 +40,21 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
     # The old light decoder's held-out figures do not travel with the new one.
     assert "heldout" not in manifest["metrics"]
     assert set(manifest["parity"]) >= set(stages) - {"presence"}
-    assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr"}
+    assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr", "code_error"}
+    assert record["code"] == 1.0
+
+
+def test_the_code_term_measures_how_far_the_network_sees_two_lights_apart(sim_data, shipped_model):
+    net = network_from_model(shipped_model)
+    lights = torch.from_numpy(data.Heldout.load(sim_data / "validation").lights)
+    distance = light_refit.CodeDistance(net, lights)
+    assert float(distance(lights, lights)) == 0.0
+    near, far = float(distance(lights * 1.05, lights)), float(distance(lights * 1.5, lights))
+    assert 0.0 < near < far
+    # Only the prediction learns: the light encoder's target is fixed.
+    pred = (lights * 1.5).requires_grad_(True)
+    distance(pred, lights).backward()
+    assert pred.grad is not None and float(pred.grad.abs().sum()) > 0.0
 
 
 def test_a_refit_never_replaces_the_model_it_refits(sim_data, shipped_model, tmp_path):
@@ -78,7 +93,7 @@ def test_a_run_trained_without_light_prediction_gets_a_light_decoder_fitted_afte
     torch.set_num_threads(2)
     run, trained = no_prediction_run(tmp_path / "no-prediction")
     out = tmp_path / "fitted"
-    settings = light_refit.FitSettings(steps=3, batch=4)
+    settings = light_refit.FitSettings(steps=3, batch=4, code=2.0)
     record = light_refit.fit_after(run, sim_data, out, settings)
     assert record["start"] == "fresh"
     net, cfg = runs.load_network(out)
@@ -111,6 +126,7 @@ def test_a_run_trained_without_light_prediction_gets_a_light_decoder_fitted_afte
     card = "\n".join(modelcard.configuration_lines(manifest, None))
     assert "no monitor loss" in card and "Light decoder fitted after training" in card
     assert "de-lit consistency x0.1" in card and "monitor colour x0 " not in card
+    assert "light code x2," in card
 
 
 def test_a_fit_after_refuses_what_it_cannot_complete(sim_data, tmp_path):

@@ -185,7 +185,9 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
         lines.append(
             f"- Light decoder {how} on the frozen encoder (`lsyd.light_refit`): {refit['steps']} steps of batch "
             f"{refit['batch']} over the {refit['frames']:,} captured frames' features, Adam (lr {refit['lr']:g}, "
-            f"cosine to a tenth), monitor colour x{refit['colour']:g}, in {refit['seconds'] / 60:.0f} minutes; "
+            f"cosine to a tenth), monitor colour x{refit['colour']:g}"
+            + (f", light code x{refit['code']:g}" if refit.get("code") else "")
+            + f", in {refit['seconds'] / 60:.0f} minutes; "
             "every other stage as trained. On the validation set its colour correlation went from "
             f"{before['colour_corr']:.2f} to {after['colour_corr']:.2f}, its monitor MAE from "
             f"{before['monitor_mae']:.4f} to {after['monitor_mae']:.4f}."
