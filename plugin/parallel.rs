@@ -4,14 +4,19 @@
 
 use std::sync::{Mutex, OnceLock};
 
-/// The threads `beside` hands work to, one a core, started at its first call
-/// and kept: starting a thread for each piece of work cost about 0.1 ms here
-/// (`cargo run --release --example paste_speed`), and a frame splits its
-/// work three or four times. `None` where no thread could be started.
+/// The threads `beside` hands work to, started at its first call and kept:
+/// starting a thread for each piece of work cost about 0.1 ms here (`cargo run
+/// --release --example paste_speed`), and a frame splits its work three or
+/// four times. One a core, at most [`MOST_THREADS`], whatever
+/// `RAYON_NUM_THREADS` says (the host's setting for its own work). Shared by
+/// every element in the process, as the cores are. `None` where no thread
+/// could be started: the work then runs on the calling thread from then on.
 fn pool() -> Option<&'static rayon::ThreadPool> {
     static POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
     POOL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
         rayon::ThreadPoolBuilder::new()
+            .num_threads(cores.min(MOST_THREADS))
             .thread_name(|i| format!("lsydrelight-beside-{i}"))
             .build()
             .ok()
@@ -19,9 +24,14 @@ fn pool() -> Option<&'static rayon::ThreadPool> {
     .as_ref()
 }
 
+/// Most threads the pool keeps: a split is two halves, so a few instances'
+/// splits at once use this many, and a large machine's hundred cores are not
+/// each given a thread.
+const MOST_THREADS: usize = 8;
+
 /// Runs `other` on another thread while `here` runs on this one, and returns
 /// both results: for work of a fraction of a millisecond (halves of a frame),
-/// which the kept threads of [`pool`] take at once. Where no thread can be
+/// which a kept thread of [`pool`] takes as soon as one is free. Where no thread can be
 /// started (the system is out of them), `other` runs here after `here`:
 /// slower, never lost. A panic in `other` carries on in this thread, as if it
 /// had run here.

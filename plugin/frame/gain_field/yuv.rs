@@ -140,6 +140,7 @@ fn read_lane<const STEP: usize>(out: &mut [f32], row: &[u8], byte: usize) {
 pub(in crate::frame) fn write_lane<const STEP: usize>(row: &mut [u8], byte: usize, values: &[f32]) {
     #[cfg(target_arch = "x86_64")]
     if STEP == 1 && std::arch::is_x86_feature_detected!("avx2") {
+        debug_assert_eq!(byte, 0, "a plane of one byte a sample");
         // SAFETY: the CPU has AVX2, checked just above.
         return unsafe { write_bytes_avx2(row, values) };
     }
