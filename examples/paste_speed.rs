@@ -174,7 +174,7 @@ fn main() {
         );
     }
     println!(
-        "a second thread's start and end (parallel::beside): {} ms",
+        "handing work to another thread and back (parallel::beside): {} ms",
         summary(&mut thread_ms)
     );
 }

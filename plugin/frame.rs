@@ -547,13 +547,20 @@ fn sample_crop_split(frame: &Frame, crop: Crop, res: usize, split: usize) -> Vec
     let [(r, r_rest), (g, g_rest), (b, b_rest)] =
         [first, second, third].map(|plane| plane.split_at_mut(split * res));
     let (top, bottom) = ([r, g, b], [r_rest, g_rest, b_rest]);
+    // Per plane pass, its weights: computed once, read by both halves.
+    let weights: Vec<AreaWeights> = frame
+        .format
+        .passes()
+        .iter()
+        .map(|pass| AreaWeights::new(crop.in_plane(pass.subsample).size, res))
+        .collect();
     if split < res {
         beside(
-            || sample_rows(frame, crop, res, split..res, bottom),
-            || sample_rows(frame, crop, res, 0..split, top),
+            || sample_rows(frame, crop, &weights, split..res, bottom),
+            || sample_rows(frame, crop, &weights, 0..split, top),
         );
     } else {
-        sample_rows(frame, crop, res, 0..res, top);
+        sample_rows(frame, crop, &weights, 0..res, top);
     }
     if frame.format.is_yuv() {
         // Averaging Y, Cb and Cr and then converting equals averaging RGB: the
@@ -577,18 +584,18 @@ fn planes_mut(image: &mut [f32], n: usize) -> [&mut [f32]; 3] {
     [first, second, third]
 }
 
-/// Output rows `rows` of the crop resampled to `res`×`res`, in 8-bit units,
-/// into `out`'s three planes (R, G, B or Y, Cb, Cr) of those rows.
+/// Output rows `rows` of the crop resampled with `weights` (one a plane pass,
+/// in the order of the format's passes), in 8-bit units, into `out`'s three
+/// planes (R, G, B or Y, Cb, Cr) of those rows.
 fn sample_rows(
     frame: &Frame,
     crop: Crop,
-    res: usize,
+    weights: &[AreaWeights],
     rows: Range<usize>,
     mut out: [&mut [f32]; 3],
 ) {
-    for pass in frame.format.passes() {
+    for (pass, w) in frame.format.passes().iter().zip(weights) {
         let area = crop.in_plane(pass.subsample);
-        let w = AreaWeights::new(area.size, res);
         let plane = &frame.planes[pass.plane];
         let emit = |i: usize, pixel: &[f32]| {
             for (lane, &v) in pass.lanes.iter().zip(pixel) {
@@ -598,10 +605,10 @@ fn sample_rows(
             }
         };
         match pass.lanes.len() {
-            1 => resample::<1>(plane, area, &w, rows.clone(), emit),
-            2 => resample::<2>(plane, area, &w, rows.clone(), emit),
-            3 => resample::<3>(plane, area, &w, rows.clone(), emit),
-            4 => resample::<4>(plane, area, &w, rows.clone(), emit),
+            1 => resample::<1>(plane, area, w, rows.clone(), emit),
+            2 => resample::<2>(plane, area, w, rows.clone(), emit),
+            3 => resample::<3>(plane, area, w, rows.clone(), emit),
+            4 => resample::<4>(plane, area, w, rows.clone(), emit),
             bpp => unreachable!("no format has {bpp} bytes a pixel"),
         }
     }

@@ -161,7 +161,7 @@ const EDGE_ROWS: usize = MOTION_RADIUS + SPLIT_RADIUS;
 /// Samples of the areas of a frame's channels from which each area is walked
 /// in two halves, on two threads. A sample takes about 3 ns; splitting saves
 /// half the walk and costs handing the half to another thread (about 20 µs,
-/// `paste_speed`'s last line; 84 µs when each split started a thread), so it
+/// `paste_speed`'s last line; about 0.1 ms when each split started a thread), so it
 /// pays from about 13,000 samples. Kept higher, where the gain is sure.
 const SPLIT_FROM: usize = 65_536;
 

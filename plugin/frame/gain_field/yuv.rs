@@ -138,22 +138,27 @@ fn read_lane<const STEP: usize>(out: &mut [f32], row: &[u8], byte: usize) {
 /// `values`, rounded, into byte `byte` of each `STEP` bytes of `row`.
 #[inline(always)]
 pub(in crate::frame) fn write_lane<const STEP: usize>(row: &mut [u8], byte: usize, values: &[f32]) {
+    let mut done = 0;
     #[cfg(target_arch = "x86_64")]
     if STEP == 1 && std::arch::is_x86_feature_detected!("avx2") {
         debug_assert_eq!(byte, 0, "a plane of one byte a sample");
         // SAFETY: the CPU has AVX2, checked just above.
-        return unsafe { write_bytes_avx2(row, values) };
+        done = unsafe { write_bytes_avx2(row, values) };
     }
-    for (sample, &v) in row.chunks_exact_mut(STEP).zip(values) {
+    for (sample, &v) in row[done * STEP..]
+        .chunks_exact_mut(STEP)
+        .zip(&values[done..])
+    {
         sample[byte] = round_to_u8(v);
     }
 }
 
-/// `write_lane::<1>` 32 samples at a time: a plane of its own (I420's Cb and
-/// Cr) takes whole vectors, where the compiler stored each byte on its own.
+/// `write_lane::<1>` 32 samples at a time, as many as fill whole blocks:
+/// a plane of its own (I420's Cb and Cr) takes whole vectors, where the
+/// compiler stored each byte on its own. Returns the samples written.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn write_bytes_avx2(row: &mut [u8], values: &[f32]) {
+fn write_bytes_avx2(row: &mut [u8], values: &[f32]) -> usize {
     use super::avx2::{BLOCK, LANES, round_to_u8, store_bytes};
     use std::arch::x86_64::*;
     let n = row.len().min(values.len());
@@ -167,9 +172,7 @@ fn write_bytes_avx2(row: &mut [u8], values: &[f32]) {
         }
         store_bytes(&mut row[k..k + BLOCK], rounded);
     }
-    for (b, &v) in row[whole..n].iter_mut().zip(&values[whole..n]) {
-        *b = crate::frame::round_to_u8(v);
-    }
+    whole
 }
 
 /// Per pixel of a luma row, its chroma sample's term (`extra`, one a block of
@@ -209,7 +212,7 @@ fn spread_pairs_avx2(out: &mut [f32], extra: &[f32], dither: &[f32]) {
                 _mm256_permute2f128_ps::<0x31>(low, high),
             ];
             for (half, pair) in pairs.into_iter().enumerate() {
-                let at = k + half * 8;
+                let at = k + half * PIXELS / 2;
                 let sum = _mm256_add_ps(pair, _mm256_loadu_ps(dither.as_ptr().add(at)));
                 _mm256_storeu_ps(out.as_mut_ptr().add(at), sum);
             }
