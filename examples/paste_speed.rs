@@ -12,6 +12,10 @@
 //! cargo run --release --example paste_speed -- [--rounds 41]
 //! ```
 //!
+//! Beside them it times a monitor frame's light (`Light::from_frame`, read
+//! from every pixel of a screen capture of that size and format, once a
+//! monitor frame).
+//!
 //! Last, it times what the crop, the paste and the denoising pay to split
 //! their work between two threads (`parallel::beside` with nothing to do),
 //! which sets the sizes from which they split.
@@ -26,6 +30,7 @@ use std::time::Instant;
 use gstlsydrelight::frame::{
     Crop, DetailDenoiser, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
 };
+use gstlsydrelight::light::Light;
 use gstlsydrelight::parallel::beside;
 
 const SIZES: [(&str, usize, usize); 4] = [
@@ -67,6 +72,7 @@ struct Case {
     denoise_ms: Vec<f64>,
     small_ms: Vec<f64>,
     paste_ms: Vec<f64>,
+    light_ms: Vec<f64>,
 }
 
 /// Times `parallel::beside` taken with nothing to do, per round.
@@ -124,6 +130,7 @@ fn main() {
                 denoise_ms: Vec::with_capacity(rounds),
                 small_ms: Vec::with_capacity(rounds),
                 paste_ms: Vec::with_capacity(rounds),
+                light_ms: Vec::with_capacity(rounds),
             });
         }
     }
@@ -150,6 +157,10 @@ fn main() {
             case.change
                 .apply(&mut case.buffers.frame_mut(), case.crop, case.feather);
             case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
+
+            let start = Instant::now();
+            std::hint::black_box(Light::from_frame(&case.buffers.frame()));
+            case.light_ms.push(start.elapsed().as_secs_f64() * 1e3);
         }
         for _ in 0..THREAD_STARTS {
             let start = Instant::now();
@@ -160,17 +171,18 @@ fn main() {
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
     println!(
-        "{:<12} {:>26} {:>26} {:>26} {:>26}",
-        "", "crop", "denoise", "paste", "denoise, small face"
+        "{:<12} {:>26} {:>26} {:>26} {:>26} {:>26}",
+        "", "crop", "denoise", "paste", "denoise, small face", "monitor light"
     );
     for case in &mut cases {
         println!(
-            "{:<12} {:>26} {:>26} {:>26} {:>26}",
+            "{:<12} {:>26} {:>26} {:>26} {:>26} {:>26}",
             case.name,
             summary(&mut case.crop_ms),
             summary(&mut case.denoise_ms),
             summary(&mut case.paste_ms),
-            summary(&mut case.small_ms)
+            summary(&mut case.small_ms),
+            summary(&mut case.light_ms)
         );
     }
     println!(

@@ -87,7 +87,9 @@ impl PixelFormat {
         }
     }
 
-    /// Cb and Cr of frame pixel (x, y) of a YUV frame.
+    /// Cb and Cr of frame pixel (x, y) of a YUV frame: the plain read that the
+    /// tests hold the faster readers (by [`PixelFormat::chroma_lanes`]) to.
+    #[cfg(test)]
     pub(crate) fn chroma_at(self, planes: &[Plane; 3], x: usize, y: usize) -> (u8, u8) {
         assert!(self.is_yuv(), "{self:?} has no chroma");
         let mut cbcr = [0; 2];
@@ -157,10 +159,28 @@ impl YuvMatrix {
 
     /// 8-bit Y, Cb, Cr (as f32) to RGB in [0, 1], not clamped.
     pub fn to_rgb(&self, y: f32, cb: f32, cr: f32) -> [f32; 3] {
-        let (yo, ys, cs) = self.scales();
-        let y = (y - yo) / ys;
-        let cb = (cb - 128.0) / cs;
-        let cr = (cr - 128.0) / cs;
+        self.rgb_of_quotients(
+            self.luma_quotient(y),
+            self.chroma_quotient(cb),
+            self.chroma_quotient(cr),
+        )
+    }
+
+    /// Y as a share of its range: the first step of [`YuvMatrix::to_rgb`],
+    /// which depends on Y alone (for code that finds it once a byte).
+    pub(crate) fn luma_quotient(&self, y: f32) -> f32 {
+        let (yo, ys, _) = self.scales();
+        (y - yo) / ys
+    }
+
+    /// Cb or Cr as a share of its range, about its middle.
+    pub(crate) fn chroma_quotient(&self, c: f32) -> f32 {
+        let (_, _, cs) = self.scales();
+        (c - 128.0) / cs
+    }
+
+    /// The rest of [`YuvMatrix::to_rgb`], from the three quotients.
+    pub(crate) fn rgb_of_quotients(&self, y: f32, cb: f32, cr: f32) -> [f32; 3] {
         let kg = 1.0 - self.kr - self.kb;
         let r = y + 2.0 * (1.0 - self.kr) * cr;
         let b = y + 2.0 * (1.0 - self.kb) * cb;

@@ -8,7 +8,8 @@
 
 use std::path::Path;
 
-use crate::frame::{AreaWeights, Frame, PixelFormat};
+use crate::frame::{AreaWeights, Frame, YuvMatrix};
+use crate::parallel::beside;
 
 pub const LIGHT_ROWS: usize = 16;
 pub const LIGHT_COLS: usize = 32;
@@ -17,6 +18,11 @@ pub const LIGHT_LEN: usize = 3 * LIGHT_ROWS * LIGHT_COLS;
 /// A light image: planar linear RGB, 3 × 16 × 32, values in [0, 1].
 #[derive(Clone, Debug, PartialEq)]
 pub struct Light(pub Vec<f32>);
+
+/// Pixels of a frame from which its light is found on two threads: about
+/// 1 ns a pixel (BGRx) to 3 (YUV) on the build machine, so a split (about
+/// 20 µs, `paste_speed`'s last line) pays from a few tens of thousands.
+const SPLIT_FROM: usize = 65_536;
 
 /// Resolution of the table that decodes sRGB values that are not whole bytes (from YUV).
 const DECODE_STEPS: usize = 4096;
@@ -73,27 +79,25 @@ impl Light {
     /// The light of a monitor frame of any supported format and size.
     pub fn from_frame(frame: &Frame) -> Light {
         let t = decode_tables();
-        let wx = AreaWeights::new(frame.width, LIGHT_COLS);
+        let taps = ColumnTaps::new(frame.width);
         let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
-        // Which output columns each input column feeds, with which weights: at most
-        // two for frames wider than the light, more for narrower ones.
-        let mut col_taps: Vec<Vec<(usize, f32)>> = vec![Vec::new(); frame.width];
-        for (o, (s, w)) in wx.start.iter().zip(&wx.weights).enumerate() {
-            for (k, wk) in w.iter().enumerate() {
-                col_taps[s + k].push((o, *wk));
-            }
-        }
+        // Each row's sums into the light's columns; rows are independent until
+        // they are summed into the light's rows, so large frames sum their two
+        // halves on two threads, to the same floats.
         let mut rows = vec![[0f32; 3 * LIGHT_COLS]; frame.height];
-        let mut linear = vec![[0f32; 3]; frame.width];
-        for (y, acc) in rows.iter_mut().enumerate() {
-            decode_row(frame, y, t, &mut linear);
-            for (x, rgb) in linear.iter().enumerate() {
-                for &(o, w) in &col_taps[x] {
-                    for c in 0..3 {
-                        acc[c * LIGHT_COLS + o] += w * rgb[c];
-                    }
-                }
+        let sum_rows = |first: usize, rows: &mut [[f32; 3 * LIGHT_COLS]]| {
+            let mut row = RowDecoder::new(frame);
+            for (y, acc) in (first..).zip(rows) {
+                row.decode(frame, y, t);
+                taps.accumulate(&row.linear, acc);
             }
+        };
+        if frame.width * frame.height >= SPLIT_FROM {
+            let mid = frame.height / 2;
+            let (top, bottom) = rows.split_at_mut(mid);
+            beside(|| sum_rows(mid, bottom), || sum_rows(0, top));
+        } else {
+            sum_rows(0, &mut rows);
         }
         let mut out = vec![0f32; LIGHT_LEN];
         for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
@@ -178,32 +182,371 @@ impl Light {
     }
 }
 
-/// Linear RGB of every pixel of row `y`.
-fn decode_row(frame: &Frame, y: usize, t: &Decode, out: &mut [[f32; 3]]) {
-    let fine = |v: f32| t.fine[(v.clamp(0.0, 1.0) * DECODE_STEPS as f32).round() as usize];
-    let p0 = &frame.planes[0];
-    match frame.format {
-        PixelFormat::I420 | PixelFormat::Nv12 | PixelFormat::Y444 => {
-            let yrow = &p0.data[y * p0.stride..];
-            for (x, o) in out.iter_mut().enumerate() {
-                let (cb, cr) = frame.format.chroma_at(&frame.planes, x, y);
-                let rgb = frame.matrix.to_rgb(yrow[x] as f32, cb as f32, cr as f32);
-                *o = rgb.map(fine);
-            }
+/// The frame columns each light column averages, with their weights: a run
+/// of consecutive columns per light column, as [`AreaWeights`] gives them.
+struct ColumnTaps {
+    wx: AreaWeights,
+}
+
+impl ColumnTaps {
+    fn new(width: usize) -> ColumnTaps {
+        ColumnTaps {
+            wx: AreaWeights::new(width, LIGHT_COLS),
         }
-        format => {
-            let (offsets, bpp) = format.packed().expect("a packed RGB format");
-            let row = &p0.data[y * p0.stride..];
-            for (x, o) in out.iter_mut().enumerate() {
-                *o = offsets.map(|off| t.bytes[row[x * bpp + off] as usize]);
+    }
+
+    /// A row's linear RGB, weighted, summed into its light columns: planar
+    /// RGB, [`LIGHT_COLS`] a channel. Each column's sum adds its terms in the
+    /// order of the frame's columns, as adding each pixel into every column
+    /// it feeds did, so the floats are the same; but the sums stay in
+    /// registers, and six are built at once (two columns, three channels),
+    /// so that each addition need not wait for the one before.
+    fn accumulate(&self, linear: &[Vec<f32>; 3], acc: &mut [f32; 3 * LIGHT_COLS]) {
+        const HALF: usize = LIGHT_COLS / 2;
+        // A light column's weights, and the pixels they weigh of each channel.
+        let column = |o: usize| {
+            let weights = self.wx.weights[o].as_slice();
+            let start = self.wx.start[o];
+            (
+                weights,
+                linear.each_ref().map(|c| &c[start..][..weights.len()]),
+            )
+        };
+        for o in 0..HALF {
+            let ((lw, lp), (rw, rp)) = (column(o), column(o + HALF));
+            let (mut l, mut r) = ([0f32; 3], [0f32; 3]);
+            let both = lw.len().min(rw.len());
+            for k in 0..both {
+                for c in 0..3 {
+                    l[c] += lw[k] * lp[c][k];
+                    r[c] += rw[k] * rp[c][k];
+                }
+            }
+            for k in both..lw.len() {
+                for c in 0..3 {
+                    l[c] += lw[k] * lp[c][k];
+                }
+            }
+            for k in both..rw.len() {
+                for c in 0..3 {
+                    r[c] += rw[k] * rp[c][k];
+                }
+            }
+            for c in 0..3 {
+                acc[c * LIGHT_COLS + o] = l[c];
+                acc[c * LIGHT_COLS + o + HALF] = r[c];
             }
         }
     }
 }
 
+/// `v.clamp(0.0, 1.0)` decoded by the fine table, at its nearest step (ties
+/// away from zero, as `f32::round`, which is a call into the C library on
+/// this build's baseline x86-64).
+fn fine_to_linear(t: &Decode, v: f32) -> f32 {
+    let scaled = v.clamp(0.0, 1.0) * DECODE_STEPS as f32;
+    // Whole steps and the rest are exact below 2^23; NaN gives step 0, as a
+    // cast of NaN does.
+    let whole = scaled as usize;
+    t.fine[whole + usize::from(scaled - whole as f32 >= 0.5)]
+}
+
+/// A frame's [`YuvMatrix`] with the quotients of every byte found once
+/// ([`YuvMatrix::luma_quotient`], [`YuvMatrix::chroma_quotient`]), and the
+/// constants of the rest for the vector build, which repeats its operations
+/// in their order.
+struct YuvToRgb {
+    matrix: YuvMatrix,
+    luma: [f32; 256],
+    chroma: [f32; 256],
+    /// `2 (1 - kr)`, `2 (1 - kb)` and `1 - kr - kb`, as `rgb_of_quotients` has them.
+    red_cr: f32,
+    blue_cb: f32,
+    kg: f32,
+}
+
+impl YuvToRgb {
+    fn new(m: &YuvMatrix) -> YuvToRgb {
+        YuvToRgb {
+            matrix: *m,
+            luma: std::array::from_fn(|v| m.luma_quotient(v as f32)),
+            chroma: std::array::from_fn(|v| m.chroma_quotient(v as f32)),
+            red_cr: 2.0 * (1.0 - m.kr),
+            blue_cb: 2.0 * (1.0 - m.kb),
+            kg: 1.0 - m.kr - m.kb,
+        }
+    }
+}
+
+/// One row of a frame at a time as planar linear RGB, with what it needs
+/// kept from row to row.
+struct RowDecoder {
+    /// The row's linear R, G and B.
+    linear: [Vec<f32>; 3],
+    /// A YUV row's quotients of Y, Cb and Cr per pixel, and the matrix's parts.
+    quotients: [Vec<f32>; 3],
+    yuv: Option<YuvToRgb>,
+}
+
+impl RowDecoder {
+    fn new(frame: &Frame) -> RowDecoder {
+        let row = || vec![0f32; frame.width];
+        RowDecoder {
+            linear: [row(), row(), row()],
+            quotients: [row(), row(), row()],
+            yuv: frame.format.is_yuv().then(|| YuvToRgb::new(&frame.matrix)),
+        }
+    }
+
+    /// Linear RGB of every pixel of row `y` into `linear`.
+    fn decode(&mut self, frame: &Frame, y: usize, t: &Decode) {
+        let p0 = &frame.planes[0];
+        let Some(m) = &self.yuv else {
+            let (offsets, bpp) = frame.format.packed().expect("a packed RGB format");
+            let row = &p0.data[y * p0.stride..][..frame.width * bpp];
+            for (channel, off) in self.linear.iter_mut().zip(offsets) {
+                for (v, pixel) in channel.iter_mut().zip(row.chunks_exact(bpp)) {
+                    *v = t.bytes[pixel[off] as usize];
+                }
+            }
+            return;
+        };
+        let [luma, cb, cr] = &mut self.quotients;
+        for (q, &byte) in luma
+            .iter_mut()
+            .zip(&p0.data[y * p0.stride..][..frame.width])
+        {
+            *q = m.luma[byte as usize];
+        }
+        for (quotients, (plane, sub, bpp, byte)) in
+            [cb, cr].into_iter().zip(frame.format.chroma_lanes())
+        {
+            let p = &frame.planes[plane];
+            let samples = &p.data[(y / sub) * p.stride + byte..];
+            match (sub, bpp) {
+                (1, 1) => spread_chroma::<1, 1>(quotients, samples, &m.chroma),
+                (2, 1) => spread_chroma::<2, 1>(quotients, samples, &m.chroma),
+                (2, 2) => spread_chroma::<2, 2>(quotients, samples, &m.chroma),
+                _ => unreachable!("chroma {sub}x subsampled, {bpp} bytes a sample"),
+            }
+        }
+        let [r, g, b] = &mut self.linear;
+        let [luma, cb, cr] = &self.quotients;
+        #[cfg(target_arch = "x86_64")]
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            let done = unsafe { yuv_to_linear_avx2(m, t, [luma, cb, cr], [r, g, b]) };
+            return yuv_to_linear(m, t, [luma, cb, cr], [r, g, b], done);
+        }
+        yuv_to_linear(m, t, [luma, cb, cr], [r, g, b], 0);
+    }
+}
+
+/// A chroma channel's quotients over a row's pixels: each sample's over the
+/// `SUB` pixels it covers; `samples` holds the channel's first byte and the
+/// rest `BPP` bytes apart.
+fn spread_chroma<const SUB: usize, const BPP: usize>(
+    out: &mut [f32],
+    samples: &[u8],
+    quotients: &[f32; 256],
+) {
+    let mut samples = samples.iter().step_by(BPP);
+    let (whole, last) = out.as_chunks_mut::<SUB>();
+    for (pixels, sample) in whole.iter_mut().zip(&mut samples) {
+        *pixels = [quotients[*sample as usize]; SUB];
+    }
+    // An odd width's last sample covers one pixel.
+    if let (Some(sample), false) = (samples.next(), last.is_empty()) {
+        last.fill(quotients[*sample as usize]);
+    }
+}
+
+/// Linear RGB of a row's YUV quotients, from pixel `from` on.
+fn yuv_to_linear(
+    m: &YuvToRgb,
+    t: &Decode,
+    [y, cb, cr]: [&[f32]; 3],
+    [r, g, b]: [&mut [f32]; 3],
+    from: usize,
+) {
+    for x in from..y.len() {
+        let [red, green, blue] = m.matrix.rgb_of_quotients(y[x], cb[x], cr[x]);
+        r[x] = fine_to_linear(t, red);
+        g[x] = fine_to_linear(t, green);
+        b[x] = fine_to_linear(t, blue);
+    }
+}
+
+/// [`yuv_to_linear`] 8 pixels at a time, as many as fill whole vectors, the
+/// fine table read by gathers; the same operations in the same order (no
+/// fused multiply-adds), so the same floats. Returns the pixels done.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn yuv_to_linear_avx2(
+    m: &YuvToRgb,
+    t: &Decode,
+    [y, cb, cr]: [&[f32]; 3],
+    [r, g, b]: [&mut [f32]; 3],
+) -> usize {
+    use std::arch::x86_64::*;
+    const LANES: usize = 8;
+    let n = y
+        .len()
+        .min(cb.len())
+        .min(cr.len())
+        .min(r.len())
+        .min(g.len())
+        .min(b.len());
+    let whole = n - n % LANES;
+    let (kr, kb) = (m.matrix.kr, m.matrix.kb);
+    let [red_cr, blue_cb, kr, kb, kg] =
+        [m.red_cr, m.blue_cb, kr, kb, m.kg].map(|v| _mm256_set1_ps(v));
+    let (zero, one, half) = (
+        _mm256_setzero_ps(),
+        _mm256_set1_ps(1.0),
+        _mm256_set1_ps(0.5),
+    );
+    let steps = _mm256_set1_ps(DECODE_STEPS as f32);
+    let fine = |v: __m256| {
+        // Finite values: max and min are the clamp (either zero ends at step 0).
+        let scaled = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(v, zero), one), steps);
+        let whole = _mm256_cvttps_epi32(scaled);
+        let rest = _mm256_sub_ps(scaled, _mm256_cvtepi32_ps(whole));
+        // The comparison's mask is -1 where the rest reaches a half: one step up.
+        let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GE_OQ>(rest, half));
+        // SAFETY: steps 0..=DECODE_STEPS, the table's length.
+        unsafe { _mm256_i32gather_ps::<4>(t.fine.as_ptr(), _mm256_sub_epi32(whole, up)) }
+    };
+    for x in (0..whole).step_by(LANES) {
+        // SAFETY: x + LANES <= whole <= every slice's length.
+        unsafe {
+            let [yv, cbv, crv] = [y, cb, cr].map(|s| _mm256_loadu_ps(s.as_ptr().add(x)));
+            let red = _mm256_add_ps(yv, _mm256_mul_ps(red_cr, crv));
+            let blue = _mm256_add_ps(yv, _mm256_mul_ps(blue_cb, cbv));
+            let green = _mm256_div_ps(
+                _mm256_sub_ps(
+                    _mm256_sub_ps(yv, _mm256_mul_ps(kr, red)),
+                    _mm256_mul_ps(kb, blue),
+                ),
+                kg,
+            );
+            _mm256_storeu_ps(r.as_mut_ptr().add(x), fine(red));
+            _mm256_storeu_ps(g.as_mut_ptr().add(x), fine(green));
+            _mm256_storeu_ps(b.as_mut_ptr().add(x), fine(blue));
+        }
+    }
+    whole
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::frame::{OwnedFrame, PixelFormat};
+
+    /// The light as first written, a pixel at a time through the frame's own
+    /// accessors: what the fast [`Light::from_frame`] must give to the bit.
+    fn reference_light(frame: &Frame) -> Light {
+        let t = decode_tables();
+        let wx = AreaWeights::new(frame.width, LIGHT_COLS);
+        let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
+        let mut col_taps: Vec<Vec<(usize, f32)>> = vec![Vec::new(); frame.width];
+        for (o, (s, w)) in wx.start.iter().zip(&wx.weights).enumerate() {
+            for (k, wk) in w.iter().enumerate() {
+                col_taps[s + k].push((o, *wk));
+            }
+        }
+        let fine = |v: f32| t.fine[(v.clamp(0.0, 1.0) * DECODE_STEPS as f32).round() as usize];
+        let mut rows = vec![[0f32; 3 * LIGHT_COLS]; frame.height];
+        for (y, acc) in rows.iter_mut().enumerate() {
+            for (x, taps) in col_taps.iter().enumerate() {
+                let p0 = &frame.planes[0];
+                let rgb = match frame.format.packed() {
+                    Some((offsets, bpp)) => {
+                        offsets.map(|off| t.bytes[p0.data[y * p0.stride + x * bpp + off] as usize])
+                    }
+                    None => {
+                        let (cb, cr) = frame.format.chroma_at(&frame.planes, x, y);
+                        let luma = p0.data[y * p0.stride + x];
+                        (frame.matrix.to_rgb(luma as f32, cb as f32, cr as f32)).map(fine)
+                    }
+                };
+                for &(o, w) in taps {
+                    for c in 0..3 {
+                        acc[c * LIGHT_COLS + o] += w * rgb[c];
+                    }
+                }
+            }
+        }
+        let mut out = vec![0f32; LIGHT_LEN];
+        for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
+            for (k, wk) in w.iter().enumerate() {
+                for c in 0..3 {
+                    for col in 0..LIGHT_COLS {
+                        out[(c * LIGHT_ROWS + r) * LIGHT_COLS + col] +=
+                            wk * rows[s + k][c * LIGHT_COLS + col];
+                    }
+                }
+            }
+        }
+        Light(out)
+    }
+
+    #[test]
+    fn the_light_is_the_reference_to_the_bit_in_every_format_and_size() {
+        let mut state = 0x2545_f491_u32;
+        let formats = [
+            PixelFormat::I420,
+            PixelFormat::Nv12,
+            PixelFormat::Y444,
+            PixelFormat::Bgrx,
+            PixelFormat::Rgb,
+        ];
+        // Wider and narrower than the light, odd sizes, cells of whole and
+        // fractional columns; limited and full range.
+        let sizes = [(256, 144), (1, 1), (3, 2), (33, 17), (101, 57), (640, 360)];
+        for format in formats {
+            for (w, h) in sizes {
+                let full_range = YuvMatrix {
+                    limited: false,
+                    ..YuvMatrix::BT601_LIMITED
+                };
+                for matrix in [YuvMatrix::BT709_LIMITED, full_range] {
+                    let owned = OwnedFrame::new(format, (w, h), 3, matrix, || {
+                        state ^= state << 13;
+                        state ^= state >> 17;
+                        state ^= state << 5;
+                        (state >> 24) as u8
+                    });
+                    let (fast, plain) = (
+                        Light::from_frame(&owned.frame()),
+                        reference_light(&owned.frame()),
+                    );
+                    let bits = |l: &Light| l.0.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    assert_eq!(bits(&fast), bits(&plain), "{format:?} {w}x{h} {matrix:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_fine_decoding_rounds_as_f32_round_does() {
+        let t = decode_tables();
+        // Ties, values just either side of them, the ends and beyond, NaN.
+        let steps = DECODE_STEPS as f32;
+        let mut values = vec![0.0, 1.0, -0.5, 2.0, f32::NAN, 0.5 / steps, 1.5 / steps];
+        for k in [1.0f32, 7.0, 2047.0, 4095.0] {
+            let tie = (k + 0.5) / steps;
+            values.extend([
+                tie,
+                f32::from_bits(tie.to_bits() - 1),
+                f32::from_bits(tie.to_bits() + 1),
+            ]);
+        }
+        for v in values {
+            let rounded = t.fine[(v.clamp(0.0, 1.0) * steps).round() as usize];
+            assert_eq!(fine_to_linear(t, v).to_bits(), rounded.to_bits(), "{v}");
+        }
+    }
 
     #[test]
     fn light_image_round_trips_through_its_srgb_bytes() {
