@@ -510,8 +510,9 @@ mod tests {
                     limited: false,
                     ..YuvMatrix::BT601_LIMITED
                 };
-                for matrix in [YuvMatrix::BT709_LIMITED, full_range] {
-                    let owned = OwnedFrame::new(format, (w, h), 3, matrix, || {
+                // Rows padded, and not: the last row then ends the buffer.
+                for (matrix, padding) in [(YuvMatrix::BT709_LIMITED, 3), (full_range, 0)] {
+                    let owned = OwnedFrame::new(format, (w, h), padding, matrix, || {
                         state ^= state << 13;
                         state ^= state >> 17;
                         state ^= state << 5;
@@ -522,7 +523,11 @@ mod tests {
                         reference_light(&owned.frame()),
                     );
                     let bits = |l: &Light| l.0.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
-                    assert_eq!(bits(&fast), bits(&plain), "{format:?} {w}x{h} {matrix:?}");
+                    assert_eq!(
+                        bits(&fast),
+                        bits(&plain),
+                        "{format:?} {w}x{h} {matrix:?} {padding}"
+                    );
                 }
             }
         }
