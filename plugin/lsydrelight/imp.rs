@@ -1399,7 +1399,11 @@ impl AggregatorImpl for LsydRelight {
                 gst::ClockTime::NONE,
             );
         }
-        let frame_seconds = started.elapsed().as_secs_f64();
+        let frame_time = started.elapsed();
+        if !late {
+            self.qos.record_full_cost(frame_time);
+        }
+        let frame_seconds = frame_time.as_secs_f64();
         self.count(|st| st.stages.frame += frame_seconds);
         element.finish_buffer(out)
     }

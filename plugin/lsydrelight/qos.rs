@@ -4,6 +4,7 @@
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
 
 use gst::prelude::*;
 use gst_base::prelude::*;
@@ -11,17 +12,39 @@ use gst_base::prelude::*;
 /// A frame's duration when its buffer and caps do not say.
 const ASSUMED_FRAME: gst::ClockTime = gst::ClockTime::from_mseconds(33);
 
+/// Weight of the latest frame in the running estimate of what a frame costs in full.
+const COST_WEIGHT: f64 = 0.1;
+
 #[derive(Default)]
 pub struct Qos {
     /// Downstream's earliest useful running time, from its QoS events.
     earliest: Mutex<Option<gst::ClockTime>>,
     /// Whether upstream is live, from the latency query.
     live: AtomicBool,
+    /// What a frame processed in full (not late) has cost lately: an
+    /// exponential average of their times in the element.
+    full_cost: Mutex<Option<Duration>>,
 }
 
 impl Qos {
     pub fn reset(&self) {
         *self.earliest.lock().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.full_cost.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
+    /// Takes the time a frame processed in full took, for [`Qos::is_late`]'s
+    /// estimate of when the next would be done.
+    pub fn record_full_cost(&self, cost: Duration) {
+        let mut average = self.full_cost.lock().unwrap_or_else(|p| p.into_inner());
+        *average = Some(match *average {
+            Some(a) => a.mul_f64(1.0 - COST_WEIGHT) + cost.mul_f64(COST_WEIGHT),
+            None => cost,
+        });
+    }
+
+    /// The estimate of what a frame processed in full costs; zero before any.
+    pub fn full_cost(&self) -> Duration {
+        (*self.full_cost.lock().unwrap_or_else(|p| p.into_inner())).unwrap_or_default()
     }
 
     pub fn set_live(&self, live: bool) {
@@ -43,7 +66,10 @@ impl Qos {
     }
 
     /// Is a frame of this running time already past its deadline, by downstream's
-    /// QoS or, in a live pipeline, by the clock?
+    /// QoS, or in a live pipeline would it be by the clock once processed in
+    /// full (what frames processed in full have cost lately)? A frame found
+    /// late then costs the paste alone, so it leaves in time rather than be
+    /// dropped downstream, and the element catches up.
     pub fn is_late(
         &self,
         element: &gst::Element,
@@ -68,7 +94,8 @@ impl Qos {
             .and_then(|a| a.latency())
             .unwrap_or(gst::ClockTime::ZERO);
         let now = clock.time().saturating_sub(base);
-        now > rt + latency + frame
+        let cost = gst::ClockTime::try_from(self.full_cost()).unwrap_or(gst::ClockTime::ZERO);
+        now + cost > rt + latency + frame
     }
 }
 
@@ -96,4 +123,23 @@ pub fn late_message(
         )
         .src(element)
         .build()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_cost_estimate_follows_frames_processed_in_full_and_resets() {
+        let qos = Qos::default();
+        assert_eq!(qos.full_cost(), Duration::ZERO);
+        qos.record_full_cost(Duration::from_millis(30));
+        assert_eq!(qos.full_cost(), Duration::from_millis(30));
+        // A slow frame moves it a tenth of the way: a spike does not make every
+        // next frame late.
+        qos.record_full_cost(Duration::from_millis(130));
+        assert_eq!(qos.full_cost(), Duration::from_millis(40));
+        qos.reset();
+        assert_eq!(qos.full_cost(), Duration::ZERO);
+    }
 }
