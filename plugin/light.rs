@@ -19,9 +19,9 @@ pub const LIGHT_LEN: usize = 3 * LIGHT_ROWS * LIGHT_COLS;
 #[derive(Clone, Debug, PartialEq)]
 pub struct Light(pub Vec<f32>);
 
-/// Pixels of a frame from which its light is found on two threads: about
-/// 1 ns a pixel (BGRx) to 3 (YUV) on the build machine, so a split (about
-/// 20 µs, `paste_speed`'s last line) pays from a few tens of thousands.
+/// Pixels of a frame from which its light is found on two threads: a few
+/// ns a pixel on one thread (`paste_speed`'s "monitor light"), so a split
+/// (about 20 µs, its last line) pays from a few tens of thousands.
 const SPLIT_FROM: usize = 65_536;
 
 /// Resolution of the table that decodes sRGB values that are not whole bytes (from YUV).
@@ -260,8 +260,11 @@ struct YuvToRgb {
     luma: [f32; 256],
     chroma: [f32; 256],
     /// `2 (1 - kr)`, `2 (1 - kb)` and `1 - kr - kb`, as `rgb_of_quotients` has them.
+    #[cfg(target_arch = "x86_64")]
     red_cr: f32,
+    #[cfg(target_arch = "x86_64")]
     blue_cb: f32,
+    #[cfg(target_arch = "x86_64")]
     kg: f32,
 }
 
@@ -271,8 +274,11 @@ impl YuvToRgb {
             matrix: *m,
             luma: std::array::from_fn(|v| m.luma_quotient(v as f32)),
             chroma: std::array::from_fn(|v| m.chroma_quotient(v as f32)),
+            #[cfg(target_arch = "x86_64")]
             red_cr: 2.0 * (1.0 - m.kr),
+            #[cfg(target_arch = "x86_64")]
             blue_cb: 2.0 * (1.0 - m.kb),
+            #[cfg(target_arch = "x86_64")]
             kg: 1.0 - m.kr - m.kb,
         }
     }
@@ -351,12 +357,17 @@ fn spread_chroma<const SUB: usize, const BPP: usize>(
     quotients: &[f32; 256],
 ) {
     let mut samples = samples.iter().step_by(BPP);
+    assert!(
+        samples.len() >= out.len().div_ceil(SUB),
+        "a chroma row shorter than its luma row"
+    );
     let (whole, last) = out.as_chunks_mut::<SUB>();
     for (pixels, sample) in whole.iter_mut().zip(&mut samples) {
         *pixels = [quotients[*sample as usize]; SUB];
     }
     // An odd width's last sample covers one pixel.
-    if let (Some(sample), false) = (samples.next(), last.is_empty()) {
+    if !last.is_empty() {
+        let sample = samples.next().expect("counted above");
         last.fill(quotients[*sample as usize]);
     }
 }
@@ -407,14 +418,17 @@ fn yuv_to_linear_avx2(
         _mm256_set1_ps(0.5),
     );
     let steps = _mm256_set1_ps(DECODE_STEPS as f32);
+    debug_assert_eq!(t.fine.len(), DECODE_STEPS + 1);
     let fine = |v: __m256| {
-        // Finite values: max and min are the clamp (either zero ends at step 0).
+        // The clamp: `max` gives its second operand, zero, for NaN (as the
+        // clamp's step 0 does), and either zero ends at step 0.
         let scaled = _mm256_mul_ps(_mm256_min_ps(_mm256_max_ps(v, zero), one), steps);
         let whole = _mm256_cvttps_epi32(scaled);
         let rest = _mm256_sub_ps(scaled, _mm256_cvtepi32_ps(whole));
         // The comparison's mask is -1 where the rest reaches a half: one step up.
         let up = _mm256_castps_si256(_mm256_cmp_ps::<_CMP_GE_OQ>(rest, half));
-        // SAFETY: steps 0..=DECODE_STEPS, the table's length.
+        // SAFETY: `scaled` is in [0, DECODE_STEPS], so the steps are
+        // 0..=DECODE_STEPS, and the table has DECODE_STEPS + 1 entries.
         unsafe { _mm256_i32gather_ps::<4>(t.fine.as_ptr(), _mm256_sub_epi32(whole, up)) }
     };
     for x in (0..whole).step_by(LANES) {
@@ -530,6 +544,58 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    /// The vector build against the plain one on quotients built to reach
+    /// the decoding table's ties: with Cb and Cr at zero, red and blue are Y.
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn the_vector_conversion_is_the_plain_one_to_the_bit_at_ties() {
+        if !std::arch::is_x86_feature_detected!("avx2") {
+            eprintln!("no AVX2 on this CPU: the vector build is not used");
+            return;
+        }
+        let t = decode_tables();
+        let steps = DECODE_STEPS as f32;
+        let mut luma = vec![-0.5, 0.0, -0.0, 1.0, 1.5, f32::NAN, 0.5 / steps];
+        for k in [0.0f32, 1.0, 7.0, 1000.0, 2047.0, 4095.0] {
+            let tie = (k + 0.5) / steps;
+            luma.extend([tie, tie.next_down(), tie.next_up()]);
+        }
+        // Those with no chroma, then as many more as fill the vectors, and a
+        // vector's worth of ordinary pixels with chroma.
+        let built = luma.len();
+        let n = built.next_multiple_of(8) + 8;
+        luma.resize(n, 0.25);
+        let mut state = 0x9e37_79b9_u32;
+        let mut chroma = || -> Vec<f32> {
+            (0..n)
+                .map(|i| {
+                    state ^= state << 13;
+                    state ^= state >> 17;
+                    state ^= state << 5;
+                    if i < built {
+                        0.0
+                    } else {
+                        (state >> 8) as f32 / (1 << 24) as f32 - 0.5
+                    }
+                })
+                .collect()
+        };
+        let (cb, cr) = (chroma(), chroma());
+        let m = YuvToRgb::new(&YuvMatrix::BT709_LIMITED);
+        let mut plain = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
+        let mut vector = plain.clone();
+        let [r, g, b] = &mut plain;
+        yuv_to_linear(&m, t, [&luma, &cb, &cr], [r, g, b], 0);
+        let [r, g, b] = &mut vector;
+        // SAFETY: the CPU has AVX2, checked above.
+        let done = unsafe { yuv_to_linear_avx2(&m, t, [&luma, &cb, &cr], [r, g, b]) };
+        assert_eq!(done, n);
+        let bits = |c: &Vec<f32>| c.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        for (c, (p, v)) in plain.iter().zip(&vector).enumerate() {
+            assert_eq!(bits(p), bits(v), "channel {c}");
         }
     }
 

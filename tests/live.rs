@@ -629,13 +629,15 @@ fn unknown_source_and_obs_recipes_keep_real_time_and_restart() {
     }
 }
 
-/// `ximagesrc` as the recipes have it, and a live test screen in its place:
-/// small, or a full-HD screen in the size and format (BGRx) that `ximagesrc`
-/// gives. Each monitor frame's light is read from every one of its pixels
-/// on the element's thread, so a small screen leaves that cost out.
+/// `ximagesrc` as the recipes have it.
 const SCREEN: &str = "ximagesrc use-damage=false ! video/x-raw,framerate=10/1";
+/// A small live test screen in its place.
 const SMALL_TEST_SCREEN: &str =
     "videotestsrc is-live=true pattern=smpte ! video/x-raw,framerate=10/1";
+/// A full-HD live test screen in its place, in the size and format (BGRx)
+/// that `ximagesrc` gives. Each monitor frame's light is read from every one
+/// of its pixels on the element's thread, so a small screen leaves that cost
+/// out.
 const FULL_HD_TEST_SCREEN: &str = "videotestsrc is-live=true pattern=smpte ! \
      video/x-raw,format=BGRx,width=1920,height=1080,framerate=10/1";
 

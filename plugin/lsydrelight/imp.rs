@@ -1214,6 +1214,7 @@ impl AggregatorImpl for LsydRelight {
                 self.side.set_fps(info.fps());
                 if changed {
                     self.reset_state("caps changed");
+                    self.qos.forget_cost();
                     self.obj().src_pad().mark_reconfigure();
                 }
             }

@@ -21,18 +21,23 @@ pub struct Qos {
     earliest: Mutex<Option<gst::ClockTime>>,
     /// Whether upstream is live, from the latency query.
     live: AtomicBool,
-    /// What a frame processed in full (not late) has cost lately: an
-    /// exponential average of their times in the element.
+    /// What a frame not found late (relit, carried or passed through) has
+    /// cost lately: an exponential average of their times in the element.
     full_cost: Mutex<Option<Duration>>,
 }
 
 impl Qos {
     pub fn reset(&self) {
         *self.earliest.lock().unwrap_or_else(|p| p.into_inner()) = None;
+        self.forget_cost();
+    }
+
+    /// Forgets what frames cost: new caps change it.
+    pub fn forget_cost(&self) {
         *self.full_cost.lock().unwrap_or_else(|p| p.into_inner()) = None;
     }
 
-    /// Takes the time a frame processed in full took, for [`Qos::is_late`]'s
+    /// Takes the time a frame not found late took, for [`Qos::is_late`]'s
     /// estimate of when the next would be done.
     pub fn record_full_cost(&self, cost: Duration) {
         let mut average = self.full_cost.lock().unwrap_or_else(|p| p.into_inner());
@@ -42,7 +47,7 @@ impl Qos {
         });
     }
 
-    /// The estimate of what a frame processed in full costs; zero before any.
+    /// The estimate of what a frame not found late costs; zero before any.
     pub fn full_cost(&self) -> Duration {
         (*self.full_cost.lock().unwrap_or_else(|p| p.into_inner())).unwrap_or_default()
     }
@@ -66,10 +71,10 @@ impl Qos {
     }
 
     /// Is a frame of this running time already past its deadline, by downstream's
-    /// QoS, or in a live pipeline would it be by the clock once processed in
-    /// full (what frames processed in full have cost lately)? A frame found
-    /// late then costs the paste alone, so it leaves in time rather than be
-    /// dropped downstream, and the element catches up.
+    /// QoS, or in a live pipeline would it be by the clock once processed as
+    /// frames not found late have been lately? A frame found late then costs
+    /// the paste alone, so it leaves in time rather than be dropped
+    /// downstream, and the element catches up.
     pub fn is_late(
         &self,
         element: &gst::Element,
@@ -94,7 +99,11 @@ impl Qos {
             .and_then(|a| a.latency())
             .unwrap_or(gst::ClockTime::ZERO);
         let now = clock.time().saturating_sub(base);
-        let cost = gst::ClockTime::try_from(self.full_cost()).unwrap_or(gst::ClockTime::ZERO);
+        // At most a frame: a frame that starts past its deadline is late
+        // whatever it costs, and one that starts before it is not found late
+        // on an estimate that a slow start or a stall has left high, which
+        // (frames found late not being counted) could otherwise stay high.
+        let cost = gst::ClockTime::try_from(self.full_cost()).map_or(frame, |c| c.min(frame));
         now + cost > rt + latency + frame
     }
 }
@@ -130,7 +139,7 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_cost_estimate_follows_frames_processed_in_full_and_resets() {
+    fn the_cost_estimate_follows_the_frames_and_resets() {
         let qos = Qos::default();
         assert_eq!(qos.full_cost(), Duration::ZERO);
         qos.record_full_cost(Duration::from_millis(30));

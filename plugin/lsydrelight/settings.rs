@@ -512,7 +512,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("qos")
                 .nick("QoS")
-                .blurb("In live pipelines, reuse the last relighting, without denoising, for frames that are late, or would be if processed in full (by what such frames cost lately), instead of falling further behind, and post QoS messages")
+                .blurb("In live pipelines, reuse the last relighting, without denoising, for frames that are late, or would be once processed (by what frames have cost lately, at most a frame's duration), instead of falling further behind, and post QoS messages")
                 .default_value(DEFAULT_QOS)
                 .mutable_playing()
                 .build(),
