@@ -228,6 +228,19 @@ pub struct OwnedFrame {
     pub matrix: YuvMatrix,
 }
 
+/// Deterministic noise bytes from `seed` (xorshift32: cheap, no dependency),
+/// for tests that fill frames with every kind of value.
+#[cfg(test)]
+pub(crate) fn test_noise(seed: u32) -> impl FnMut() -> u8 {
+    let mut state = seed | 1;
+    move || {
+        state ^= state << 13;
+        state ^= state >> 17;
+        state ^= state << 5;
+        (state >> 24) as u8
+    }
+}
+
 impl OwnedFrame {
     /// A frame of `format` whose bytes, padding included, come from `fill` in order.
     pub fn new(

@@ -80,7 +80,6 @@ impl Light {
     pub fn from_frame(frame: &Frame) -> Light {
         let t = decode_tables();
         let taps = ColumnTaps::new(frame.width);
-        let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
         // Each row's sums into the light's columns; rows are independent until
         // they are summed into the light's rows, so large frames sum their two
         // halves on two threads, to the same floats.
@@ -99,18 +98,7 @@ impl Light {
         } else {
             sum_rows(0, &mut rows);
         }
-        let mut out = vec![0f32; LIGHT_LEN];
-        for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
-            for (k, wk) in w.iter().enumerate() {
-                for c in 0..3 {
-                    for col in 0..LIGHT_COLS {
-                        out[(c * LIGHT_ROWS + r) * LIGHT_COLS + col] +=
-                            wk * rows[s + k][c * LIGHT_COLS + col];
-                    }
-                }
-            }
-        }
-        Light(out)
+        light_of_rows(&rows)
     }
 
     /// The light of a PNG image of monitor content (a target light).
@@ -180,6 +168,24 @@ impl Light {
     pub fn is_finite(&self) -> bool {
         self.0.iter().all(|v| v.is_finite())
     }
+}
+
+/// The light from each frame row's sums into the light's columns
+/// ([`ColumnTaps::accumulate`]): the rows averaged by area into the light's rows.
+fn light_of_rows(rows: &[[f32; 3 * LIGHT_COLS]]) -> Light {
+    let wy = AreaWeights::new(rows.len(), LIGHT_ROWS);
+    let mut out = vec![0f32; LIGHT_LEN];
+    for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
+        for (k, wk) in w.iter().enumerate() {
+            for c in 0..3 {
+                for col in 0..LIGHT_COLS {
+                    out[(c * LIGHT_ROWS + r) * LIGHT_COLS + col] +=
+                        wk * rows[s + k][c * LIGHT_COLS + col];
+                }
+            }
+        }
+    }
+    Light(out)
 }
 
 /// The frame columns each light column averages, with their weights: a run
@@ -252,20 +258,11 @@ fn fine_to_linear(t: &Decode, v: f32) -> f32 {
 }
 
 /// A frame's [`YuvMatrix`] with the quotients of every byte found once
-/// ([`YuvMatrix::luma_quotient`], [`YuvMatrix::chroma_quotient`]), and the
-/// constants of the rest for the vector build, which repeats its operations
-/// in their order.
+/// ([`YuvMatrix::luma_quotient`], [`YuvMatrix::chroma_quotient`]).
 struct YuvToRgb {
     matrix: YuvMatrix,
     luma: [f32; 256],
     chroma: [f32; 256],
-    /// `2 (1 - kr)`, `2 (1 - kb)` and `1 - kr - kb`, as `rgb_of_quotients` has them.
-    #[cfg(target_arch = "x86_64")]
-    red_cr: f32,
-    #[cfg(target_arch = "x86_64")]
-    blue_cb: f32,
-    #[cfg(target_arch = "x86_64")]
-    kg: f32,
 }
 
 impl YuvToRgb {
@@ -274,12 +271,6 @@ impl YuvToRgb {
             matrix: *m,
             luma: std::array::from_fn(|v| m.luma_quotient(v as f32)),
             chroma: std::array::from_fn(|v| m.chroma_quotient(v as f32)),
-            #[cfg(target_arch = "x86_64")]
-            red_cr: 2.0 * (1.0 - m.kr),
-            #[cfg(target_arch = "x86_64")]
-            blue_cb: 2.0 * (1.0 - m.kb),
-            #[cfg(target_arch = "x86_64")]
-            kg: 1.0 - m.kr - m.kb,
         }
     }
 }
@@ -409,9 +400,10 @@ fn yuv_to_linear_avx2(
         .min(g.len())
         .min(b.len());
     let whole = n - n % LANES;
+    // The constants as `rgb_of_quotients` computes them.
     let (kr, kb) = (m.matrix.kr, m.matrix.kb);
     let [red_cr, blue_cb, kr, kb, kg] =
-        [m.red_cr, m.blue_cb, kr, kb, m.kg].map(|v| _mm256_set1_ps(v));
+        [2.0 * (1.0 - kr), 2.0 * (1.0 - kb), kr, kb, 1.0 - kr - kb].map(|v| _mm256_set1_ps(v));
     let (zero, one, half) = (
         _mm256_setzero_ps(),
         _mm256_set1_ps(1.0),
@@ -455,14 +447,13 @@ fn yuv_to_linear_avx2(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{OwnedFrame, PixelFormat};
+    use crate::frame::{OwnedFrame, PixelFormat, test_noise};
 
     /// The light as first written, a pixel at a time through the frame's own
     /// accessors: what the fast [`Light::from_frame`] must give to the bit.
     fn reference_light(frame: &Frame) -> Light {
         let t = decode_tables();
         let wx = AreaWeights::new(frame.width, LIGHT_COLS);
-        let wy = AreaWeights::new(frame.height, LIGHT_ROWS);
         let mut col_taps: Vec<Vec<(usize, f32)>> = vec![Vec::new(); frame.width];
         for (o, (s, w)) in wx.start.iter().zip(&wx.weights).enumerate() {
             for (k, wk) in w.iter().enumerate() {
@@ -491,23 +482,12 @@ mod tests {
                 }
             }
         }
-        let mut out = vec![0f32; LIGHT_LEN];
-        for (r, (s, w)) in wy.start.iter().zip(&wy.weights).enumerate() {
-            for (k, wk) in w.iter().enumerate() {
-                for c in 0..3 {
-                    for col in 0..LIGHT_COLS {
-                        out[(c * LIGHT_ROWS + r) * LIGHT_COLS + col] +=
-                            wk * rows[s + k][c * LIGHT_COLS + col];
-                    }
-                }
-            }
-        }
-        Light(out)
+        light_of_rows(&rows)
     }
 
     #[test]
     fn the_light_is_the_reference_to_the_bit_in_every_format_and_size() {
-        let mut state = 0x2545_f491_u32;
+        let mut noise = test_noise(0x2545_f491);
         let formats = [
             PixelFormat::I420,
             PixelFormat::Nv12,
@@ -526,12 +506,7 @@ mod tests {
                 };
                 // Rows padded, and not: the last row then ends the buffer.
                 for (matrix, padding) in [(YuvMatrix::BT709_LIMITED, 3), (full_range, 0)] {
-                    let owned = OwnedFrame::new(format, (w, h), padding, matrix, || {
-                        state ^= state << 13;
-                        state ^= state >> 17;
-                        state ^= state << 5;
-                        (state >> 24) as u8
-                    });
+                    let owned = OwnedFrame::new(format, (w, h), padding, matrix, &mut noise);
                     let (fast, plain) = (
                         Light::from_frame(&owned.frame()),
                         reference_light(&owned.frame()),
@@ -568,23 +543,20 @@ mod tests {
         let built = luma.len();
         let n = built.next_multiple_of(8) + 8;
         luma.resize(n, 0.25);
-        let mut state = 0x9e37_79b9_u32;
+        let m = YuvToRgb::new(&YuvMatrix::BT709_LIMITED);
+        let mut noise = test_noise(0x9e37_79b9);
         let mut chroma = || -> Vec<f32> {
             (0..n)
                 .map(|i| {
-                    state ^= state << 13;
-                    state ^= state >> 17;
-                    state ^= state << 5;
                     if i < built {
                         0.0
                     } else {
-                        (state >> 8) as f32 / (1 << 24) as f32 - 0.5
+                        m.chroma[noise() as usize]
                     }
                 })
                 .collect()
         };
         let (cb, cr) = (chroma(), chroma());
-        let m = YuvToRgb::new(&YuvMatrix::BT709_LIMITED);
         let mut plain = [vec![0f32; n], vec![0f32; n], vec![0f32; n]];
         let mut vector = plain.clone();
         let [r, g, b] = &mut plain;

@@ -404,11 +404,7 @@ mod tests {
 
     #[test]
     fn sampling_gives_the_per_pixel_reading_bit_for_bit() {
-        let mut seed = 7u32;
-        let mut noise = || {
-            seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-            (seed >> 24) as u8
-        };
+        let mut noise = crate::frame::test_noise(7);
         let formats = [
             PixelFormat::I420,
             PixelFormat::Nv12,
