@@ -9,8 +9,11 @@
 //! face`): a face a ninth of it, farther away.
 //!
 //! ```text
-//! cargo run --release --example paste_speed -- [--rounds 41]
+//! cargo run --release --example paste_speed -- [--rounds 41] [--only "720p I420"]
 //! ```
+//!
+//! `--only` keeps the sizes and formats whose row name contains it (as
+//! printed: "720p I420", "Bgrx"), to time or profile one case alone.
 //!
 //! Beside them it times a monitor frame's light (`Light::from_frame`, read
 //! from every pixel of a screen capture of that size and format, once a
@@ -92,6 +95,7 @@ fn summary(times: &mut [f64]) -> String {
 fn main() {
     let mut args = std::env::args().skip(1);
     let mut rounds = 41;
+    let mut only = String::new();
     while let Some(arg) = args.next() {
         match arg.as_str() {
             "--rounds" => {
@@ -100,39 +104,49 @@ fn main() {
                     .and_then(|v| v.parse().ok())
                     .expect("--rounds N")
             }
-            other => panic!("unknown argument {other}; usage: paste_speed [--rounds N]"),
+            "--only" => only = args.next().expect("--only NAME"),
+            other => {
+                panic!("unknown argument {other}; usage: paste_speed [--rounds N] [--only NAME]")
+            }
         }
     }
 
     let mut cases: Vec<Case> = Vec::new();
     let mut thread_ms = Vec::with_capacity(rounds * THREAD_STARTS);
-    for (label, width, height) in SIZES {
-        for format in FORMATS {
-            let buffers = noisy_frame(format, width, height, cases.len() as u32 + 7);
-            let crop = Crop::centred(width, height, 0.5, 0.5, 1.0);
-            let input = sample_crop(&buffers.frame(), crop, RES);
-            // A plausible change: darker overall, brighter towards one side.
-            let relit: Vec<f32> = input
-                .iter()
-                .enumerate()
-                .map(|(i, v)| (0.8 * v + 0.2 * (i % RES) as f32 / RES as f32).min(1.0))
-                .collect();
-            cases.push(Case {
-                name: format!("{label} {format:?}"),
-                change: LightingChange::new(&input, &relit, RES),
-                buffers,
-                crop,
-                feather: (FEATHER * crop.size as f64).round() as usize,
-                denoiser: DetailDenoiser::default(),
-                small_crop: Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP),
-                small_denoiser: DetailDenoiser::default(),
-                crop_ms: Vec::with_capacity(rounds),
-                denoise_ms: Vec::with_capacity(rounds),
-                small_ms: Vec::with_capacity(rounds),
-                paste_ms: Vec::with_capacity(rounds),
-                light_ms: Vec::with_capacity(rounds),
-            });
+    // Each case's frame is seeded by its place among all cases, so `--only`
+    // times the same frames as a full run.
+    let all = SIZES
+        .iter()
+        .flat_map(|size| FORMATS.map(|format| (*size, format)));
+    for (seed, ((label, width, height), format)) in (7u32..).zip(all) {
+        let name = format!("{label} {format:?}");
+        if !name.contains(&only) {
+            continue;
         }
+        let buffers = noisy_frame(format, width, height, seed);
+        let crop = Crop::centred(width, height, 0.5, 0.5, 1.0);
+        let input = sample_crop(&buffers.frame(), crop, RES);
+        // A plausible change: darker overall, brighter towards one side.
+        let relit: Vec<f32> = input
+            .iter()
+            .enumerate()
+            .map(|(i, v)| (0.8 * v + 0.2 * (i % RES) as f32 / RES as f32).min(1.0))
+            .collect();
+        cases.push(Case {
+            name,
+            change: LightingChange::new(&input, &relit, RES),
+            buffers,
+            crop,
+            feather: (FEATHER * crop.size as f64).round() as usize,
+            denoiser: DetailDenoiser::default(),
+            small_crop: Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP),
+            small_denoiser: DetailDenoiser::default(),
+            crop_ms: Vec::with_capacity(rounds),
+            denoise_ms: Vec::with_capacity(rounds),
+            small_ms: Vec::with_capacity(rounds),
+            paste_ms: Vec::with_capacity(rounds),
+            light_ms: Vec::with_capacity(rounds),
+        });
     }
 
     for _ in 0..rounds {
