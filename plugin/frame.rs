@@ -241,6 +241,18 @@ pub(crate) fn test_noise(seed: u32) -> impl FnMut() -> u8 {
     }
 }
 
+/// One format of each layout, for tests that walk them all: planar and
+/// semi-planar YUV with subsampled chroma, planar YUV without, packed RGB with
+/// and without padding.
+#[cfg(test)]
+pub(crate) const ONE_FORMAT_OF_EACH_LAYOUT: [PixelFormat; 5] = [
+    PixelFormat::I420,
+    PixelFormat::Nv12,
+    PixelFormat::Y444,
+    PixelFormat::Bgrx,
+    PixelFormat::Rgb,
+];
+
 impl OwnedFrame {
     /// A frame of `format` whose bytes, padding included, come from `fill` in order.
     pub fn new(

@@ -447,7 +447,7 @@ fn yuv_to_linear_avx2(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{OwnedFrame, PixelFormat, test_noise};
+    use crate::frame::{ONE_FORMAT_OF_EACH_LAYOUT, OwnedFrame, test_noise};
 
     /// The light as first written, a pixel at a time through the frame's own
     /// accessors: what the fast [`Light::from_frame`] must give to the bit.
@@ -488,17 +488,10 @@ mod tests {
     #[test]
     fn the_light_is_the_reference_to_the_bit_in_every_format_and_size() {
         let mut noise = test_noise(0x2545_f491);
-        let formats = [
-            PixelFormat::I420,
-            PixelFormat::Nv12,
-            PixelFormat::Y444,
-            PixelFormat::Bgrx,
-            PixelFormat::Rgb,
-        ];
         // Wider and narrower than the light, odd sizes, cells of whole and
         // fractional columns; limited and full range.
         let sizes = [(256, 144), (1, 1), (3, 2), (33, 17), (101, 57), (640, 360)];
-        for format in formats {
+        for format in ONE_FORMAT_OF_EACH_LAYOUT {
             for (w, h) in sizes {
                 let full_range = YuvMatrix {
                     limited: false,

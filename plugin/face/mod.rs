@@ -405,14 +405,7 @@ mod tests {
     #[test]
     fn sampling_gives_the_per_pixel_reading_bit_for_bit() {
         let mut noise = crate::frame::test_noise(7);
-        let formats = [
-            PixelFormat::I420,
-            PixelFormat::Nv12,
-            PixelFormat::Y444,
-            PixelFormat::Bgrx,
-            PixelFormat::Rgb,
-        ];
-        for format in formats {
+        for format in crate::frame::ONE_FORMAT_OF_EACH_LAYOUT {
             let owned =
                 OwnedFrame::new(format, (203, 117), 5, YuvMatrix::BT601_LIMITED, &mut noise);
             let frame = owned.frame();

@@ -193,15 +193,7 @@ fn nothing_changes_beyond_the_fade_or_at_strength_zero() {
 /// Every plane's bytes of a frame.
 type Planes = Vec<Vec<u8>>;
 
-/// One format of each layout: planar and semi-planar YUV with subsampled
-/// chroma, planar YUV without, packed RGB with and without padding.
-const FORMATS: [PixelFormat; 5] = [
-    PixelFormat::I420,
-    PixelFormat::Nv12,
-    PixelFormat::Y444,
-    PixelFormat::Bgrx,
-    PixelFormat::Rgb,
-];
+use crate::frame::ONE_FORMAT_OF_EACH_LAYOUT as FORMATS;
 
 #[test]
 fn every_format_is_denoised_and_padding_kept() {
