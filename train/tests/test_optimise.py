@@ -1,6 +1,7 @@
 """The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed by kernel
-rows matches the original up to rounding, on single convolutions and on the shipped network's
-stages with real and random inputs; other convolutions are left alone; the shipped model is
+rows, and an AdaIN's scale and shift folded into its normalisation, match the original up to
+rounding, on single operations and on the shipped network's stages with real and random
+inputs; other convolutions and plain normalisations are left alone; the shipped model is
 rewritten and keeps its contract; the benchmark times it with and without the rewrites beside
 PyTorch."""
 
@@ -11,7 +12,7 @@ import torch
 from onnx import TensorProto, helper, numpy_helper
 from skimage import data as skdata
 
-from lsyd import contract, data, export, optimise, variants
+from lsyd import contract, data, export, model, optimise, variants
 from lsyd.evaluation import benchmark
 
 
@@ -93,6 +94,50 @@ def test_original_parameter_undoes_the_layout():
     np.testing.assert_array_equal(optimise.original_parameter(rows_bias, b.shape), b)
 
 
+def adain_graph(path, channels: int = 16, size: int = 24) -> onnx.ModelProto:
+    """``model.AdaIN`` with random weights, exported as the network's stages are."""
+    torch.manual_seed(channels)
+    block = model.AdaIN(channels, channels, 32).eval()
+    with torch.no_grad():
+        block.affine.weight.normal_(0, 0.2)
+        block.affine.bias.normal_(0, 0.2)
+    x, code = torch.rand(1, channels, size, size), torch.rand(1, 32)
+    torch.onnx.export(
+        block, (x, code), path, input_names=["x", "code"], output_names=["y"], opset_version=export.OPSET, dynamo=False
+    )
+    return onnx.load(path)
+
+
+def test_adain_folded_into_its_normalisation_matches_the_original(tmp_path):
+    original = adain_graph(tmp_path / "adain.onnx")
+    folded = copy(original)
+    assert len(optimise.adain_into_norms(folded)) == 1
+    ops = [n.op_type for n in folded.graph.node]
+    assert sorted(ops) == sorted(["Conv", "Gemm", "Add", "Reshape", "Split", "InstanceNormalization", "LeakyRelu"]), ops
+    assert len(original.graph.node) > 3 * len(ops), "the exported AdaIN's small operations are gone"
+    assert folded.graph.input == original.graph.input and folded.graph.output == original.graph.output
+    # Codes and features wider than [0, 1): gamma below -1 flips a channel, which must survive.
+    rng = np.random.default_rng(2)
+    wide = {
+        "x": 4 * rng.standard_normal((1, 16, 24, 24)).astype(np.float32),
+        "code": 8 * rng.standard_normal((1, 32)).astype(np.float32),
+    }
+    assert optimise.max_difference(original, folded, optimise.random_feeds(original) + [wide]) <= optimise.TOLERANCE
+    assert optimise.adain_into_norms(folded) == [], "folding twice changes nothing"
+
+
+def test_plain_instance_normalisation_is_left_alone(tmp_path):
+    torch.onnx.export(
+        torch.nn.InstanceNorm2d(8),
+        torch.rand(1, 8, 12, 12),
+        tmp_path / "norm.onnx",
+        opset_version=export.OPSET,
+        dynamo=False,
+    )
+    norm = onnx.load(tmp_path / "norm.onnx")
+    assert optimise.adain_into_norms(norm) == []
+
+
 def tensors(model: onnx.ModelProto) -> list[tuple]:
     def spec(v):
         t = v.type.tensor_type
@@ -108,7 +153,7 @@ def test_shipped_model_is_rewritten_and_keeps_its_contract(shipped_model, tmp_pa
         model = onnx.load(shipped_model / spec["file"])
         want = [[(t["name"], t["shape"], t["dtype"]) for t in spec[k]] for k in ("inputs", "outputs")]
         assert tensors(model) == want, stage
-        assert optimise.convs_by_rows(model) == [], f"{stage} has a convolution left to rewrite"
+        assert optimise.rewrite(model) == [], f"{stage} has an operation left to rewrite"
     decoder = onnx.load(shipped_model / "decoder.onnx")
     weight = next(t for t in decoder.graph.initializer if t.name == "net.decoder.out.weight")
     assert list(weight.dims) == [7 * 3, 16, 1, 7], "the decoder's output convolution is not by rows"
@@ -135,7 +180,7 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
     for stage in contract.STAGES:
         original = onnx.load(tmp_path / contract.stage_file(stage))
         rewritten = copy(original)
-        if not optimise.convs_by_rows(rewritten):
+        if not optimise.rewrite(rewritten):
             continue
         feeds = [real[stage], *optimise.random_feeds(original)]
         diffs[stage] = optimise.max_difference(original, rewritten, feeds)
@@ -143,7 +188,7 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
         shipped = onnx.load(shipped_model / contract.stage_file(stage))
         assert optimise.max_difference(rewritten, shipped, feeds) == 0.0, stage
     print(f"max abs difference of the rewritten stages: {diffs}")  # shown with pytest -s
-    assert list(diffs) == ["decoder"]
+    assert list(diffs) == ["delight", "decoder"]
     assert max(diffs.values()) <= optimise.TOLERANCE
 
 

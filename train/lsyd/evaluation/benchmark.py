@@ -529,8 +529,8 @@ def main() -> None:
     p.add_argument(
         "stage",
         choices=["export", "report", "network", "stages", "traffic", "skips"],
-        help="network: the network alone against PyTorch; stages: CPU time of each stage of --model "
-        "and --int8; traffic: the network's time after memory traffic between frames; skips: only the "
+        help="network: the network alone against PyTorch; stages: CPU time of each stage of --model, "
+        "--int8 and --against; traffic: the network's time after memory traffic between frames; skips: only the "
         "skip table, from the element's run alone (`--group skip`)",
     )
     p.add_argument("--data", type=Path, default=ROOT / "data")
@@ -538,13 +538,19 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=ROOT / "results" / "benchmark")
     p.add_argument("--model", type=Path, default=ROOT / "models" / "default", help="the model the network stage times")
     p.add_argument("--int8", type=Path, help="network: also time this int8 variant of --model (`lsyd.variants`)")
+    p.add_argument(
+        "--against",
+        type=Path,
+        help="stages: also time this folder of the same network (say --model before a rewrite), interleaved",
+    )
     a = p.parse_args()
     if a.stage == "export":
         export_all(a.data, a.runs)
     elif a.stage == "report":
         report(a.data, a.out)
     elif a.stage == "stages":
-        folders = {"fp32": a.model, **({"int8": a.int8} if a.int8 else {})}
+        folders = {"fp32": a.model, "int8": a.int8, "against": a.against}
+        folders = {k: f for k, f in folders.items() if f is not None}
         for stage, by in stage_timings(folders).items():
             cells = ", ".join(f"{k} {v['median']:.3f} ({v['min']:.3f}-{v['max']:.3f})" for k, v in by.items())
             print(f"{stage}: {cells} CPU ms a run, 1 thread")
