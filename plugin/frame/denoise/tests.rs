@@ -290,15 +290,25 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
     // Every format, sizes odd and even, a face that moves, grows, leaves the
     // frame's edge, fades, disappears and comes back, and a reset: the fast
     // denoiser must match the plain one's bytes exactly, and its filtered
-    // detail and noise level, which carry into every later frame. Walked
+    // detail and noise level, which carry into every later frame, in every
+    // build of the walk this CPU can run (portable, AVX2, AVX-512). Walked
     // whole on one thread, and split in halves on two, down to faces so small
     // that an area is a few rows and the rows copied beyond a half reach
     // past the area's edge.
     let mut fewest_rows = usize::MAX;
-    for (format, split_from) in FORMATS.into_iter().flat_map(|f| [(f, SPLIT_FROM), (f, 0)]) {
+    let runs = FORMATS
+        .into_iter()
+        .flat_map(|f| [(f, SPLIT_FROM), (f, 0)])
+        .flat_map(|run| {
+            Build::available()
+                .into_iter()
+                .map(move |build| (run, build))
+        });
+    for ((format, split_from), build) in runs {
         for size in [(96, 64), (75, 53)] {
             let mut fast = DetailDenoiser {
                 split_from,
+                build,
                 ..DetailDenoiser::default()
             };
             let mut plain = reference::ReferenceDenoiser::default();
@@ -326,7 +336,7 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
                 for (p, (pa, pb)) in a.planes.iter().zip(&b.planes).enumerate() {
                     assert!(
                         pa.0 == pb.0,
-                        "{format:?} {size:?} split from {split_from}: frame {i} plane {p}"
+                        "{format:?} {size:?} split from {split_from}, {build:?}: frame {i} plane {p}"
                     );
                 }
                 assert_eq!(fast.channels.len(), plain.channels.len());
@@ -336,7 +346,7 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
                     }
                     assert!(
                         f.detail == p.detail && f.noise == p.noise,
-                        "{format:?} {size:?} split from {split_from}: frame {i} channel {k}: detail or noise"
+                        "{format:?} {size:?} split from {split_from}, {build:?}: frame {i} channel {k}: detail or noise"
                     );
                 }
             }
