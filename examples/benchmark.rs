@@ -45,10 +45,10 @@ use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
+use clap::{ArgGroup, Parser};
 use gst::prelude::*;
 use lsydrelight_testkit::{
     checkout,
-    flags::flag,
     footage::Format,
     init,
     recording::{ensure_recording, score_recording},
@@ -930,23 +930,67 @@ fn quality(frames: usize) -> Result<String, String> {
     Ok(text)
 }
 
+/// The element's side of the run-time against error benchmark. With no mode,
+/// the full run: every variant in its own process, into `<out>/element.json`.
+#[derive(Parser)]
+#[command(group(ArgGroup::new("mode").args(["stages", "first_frame", "reuse", "quality"])))]
+struct Args {
+    /// Where results go (default: results/benchmark).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The full run: fewer variants.
+    #[arg(long)]
+    quick: bool,
+    /// The full run: only the variants of this group (e.g. skip).
+    #[arg(long)]
+    group: Option<String>,
+    /// Where the element's time goes, stage by stage, at every size and format.
+    #[arg(long)]
+    stages: bool,
+    /// Time from PLAYING to the first relit buffer of a live 720p pipeline.
+    #[arg(long)]
+    first_frame: bool,
+    /// What the reuse interval buys, and what it costs in error.
+    #[arg(long)]
+    reuse: bool,
+    /// What the output looks like, measured without ground truth.
+    #[arg(long)]
+    quality: bool,
+    /// --stages and --reuse: interleaved rounds.
+    #[arg(long, default_value_t = 3)]
+    rounds: usize,
+    /// --stages: cases such as 1280x720/I420; --reuse: recordings and sizes such as steady,1280x720.
+    #[arg(long, value_delimiter = ',')]
+    only: Vec<String>,
+    /// --stages: the network's threads.
+    #[arg(long, default_value_t = 2)]
+    threads: u32,
+    /// --first-frame: pipeline starts (at least 2).
+    #[arg(long, default_value_t = 7)]
+    repeats: usize,
+    /// --quality: frames of each clip.
+    #[arg(long, default_value_t = 90)]
+    frames: usize,
+    /// One variant, as JSON, run in this process: how the full run starts its children.
+    #[arg(long, hide = true)]
+    child: Option<String>,
+}
+
 fn main() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    if args.first().map(String::as_str) == Some("--child") {
-        let v: Variant = serde_json::from_str(&args[1]).map_err(|e| e.to_string())?;
+    let args = Args::parse();
+    if let Some(variant) = &args.child {
+        let v: Variant = serde_json::from_str(variant).map_err(|e| e.to_string())?;
         let r = run_child(v)?;
         println!("{}", serde_json::to_string(&r).unwrap());
         return Ok(());
     }
-    let out = flag("--out")
-        .map(PathBuf::from)
+    let out = args
+        .out
+        .clone()
         .unwrap_or_else(|| checkout().join("results/benchmark"));
-    let quick = args.iter().any(|a| a == "--quick");
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
-    if args.iter().any(|a| a == "--first-frame") {
-        let repeats =
-            flag("--repeats").map_or(Ok(7), |r| r.parse().map_err(|_| "bad --repeats"))?;
-        let times = first_frame(repeats.max(2))?;
+    if args.first_frame {
+        let times = first_frame(args.repeats.max(2))?;
         let mut later = times[1..].to_vec();
         later.sort_by(f64::total_cmp);
         println!(
@@ -960,47 +1004,26 @@ fn main() -> Result<(), String> {
         );
         return Ok(());
     }
-    if args.iter().any(|a| a == "--stages") {
-        let rounds = flag("--rounds").map_or(Ok(3), |r| r.parse().map_err(|_| "bad --rounds"))?;
-        // `--only 1280x720/I420,1920x1080/NV12`: those cases alone.
-        let only: Vec<String> = flag("--only")
-            .map(|o| o.split(',').map(str::to_string).collect())
-            .unwrap_or_default();
-        let threads =
-            flag("--threads").map_or(Ok(2), |t| t.parse().map_err(|_| "bad --threads"))?;
-        let table = stages(rounds, &only, threads)?;
-        let path = out.join("stages.md");
-        std::fs::write(&path, &table).map_err(|e| e.to_string())?;
-        print!("{table}");
-        eprintln!("wrote {}", path.display());
-        return Ok(());
-    }
-    if args.iter().any(|a| a == "--quality") {
-        let frames = flag("--frames").map_or(Ok(90), |r| r.parse().map_err(|_| "bad --frames"))?;
-        let table = quality(frames)?;
-        let path = out.join("quality.md");
-        std::fs::write(&path, &table).map_err(|e| e.to_string())?;
-        print!("{table}");
-        eprintln!("wrote {}", path.display());
-        return Ok(());
-    }
-    if args.iter().any(|a| a == "--reuse") {
-        let rounds = flag("--rounds").map_or(Ok(3), |r| r.parse().map_err(|_| "bad --rounds"))?;
-        // `--only steady,1280x720`: those recordings and sizes alone.
-        let only: Vec<String> = flag("--only")
-            .map(|o| o.split(',').map(str::to_string).collect())
-            .unwrap_or_default();
-        let table = reuse(rounds, &only)?;
-        let path = out.join("reuse.md");
+    let table = if args.stages {
+        Some(("stages.md", stages(args.rounds, &args.only, args.threads)?))
+    } else if args.quality {
+        Some(("quality.md", quality(args.frames)?))
+    } else if args.reuse {
+        Some(("reuse.md", reuse(args.rounds, &args.only)?))
+    } else {
+        None
+    };
+    if let Some((name, table)) = table {
+        let path = out.join(name);
         std::fs::write(&path, &table).map_err(|e| e.to_string())?;
         print!("{table}");
         eprintln!("wrote {}", path.display());
         return Ok(());
     }
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let group = flag("--group");
+    let group = args.group;
     let mut results = Vec::new();
-    for v in variants(&checkout(), quick)
+    for v in variants(&checkout(), args.quick)
         .into_iter()
         .filter(|v| group.as_ref().is_none_or(|g| &v.group == g))
     {

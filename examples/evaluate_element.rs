@@ -10,24 +10,38 @@
 //!     [--model models/default] [--record]
 //! ```
 
+use clap::Parser;
 use lsydrelight_testkit::{
     checkout, default_model,
-    flags::flag,
     recording::{ensure_recording, score_recording},
 };
 use std::path::PathBuf;
 
+/// Scores the element end to end on a simulator recording, every target light.
+#[derive(Parser)]
+struct Args {
+    /// The simulator's recording (`deskstage` names: call, steady, slow, cuts, ...).
+    #[arg(long, default_value = "call")]
+    recording: String,
+    /// Frames of it.
+    #[arg(long, default_value_t = 90)]
+    frames: usize,
+    /// The model folder (default: the element's default model).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Write the figures into the model's manifest (`metrics.element`).
+    #[arg(long)]
+    record: bool,
+}
+
 fn main() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let recording = flag("--recording").unwrap_or_else(|| "call".into());
-    let frames: usize = flag("--frames")
-        .map(|f| f.parse().map_err(|_| "bad --frames"))
-        .transpose()?
-        .unwrap_or(90);
-    let model = flag("--model")
-        .map(PathBuf::from)
-        .unwrap_or_else(default_model);
-    let record = args.iter().any(|a| a == "--record");
+    let Args {
+        recording,
+        frames,
+        model,
+        record,
+    } = Args::parse();
+    let model = model.unwrap_or_else(default_model);
 
     let dir = checkout().join(format!("target/recordings/{recording}-{frames}"));
     ensure_recording(&dir, &recording, frames)?;

@@ -20,9 +20,9 @@
 //!     [--set denoise=false] [--set reuse-interval=1]
 //! ```
 
+use clap::Parser;
 use lsydrelight_testkit::{
     checkout,
-    flags::flag,
     recording::{Score, ensure_clean_face, ensure_recording, score_face},
 };
 
@@ -40,33 +40,46 @@ fn tof(relit: Option<f64>, input: Option<f64>) -> String {
     }
 }
 
+/// How much the element flickers, and where its error lies, on the standard
+/// recordings against their exact ground truth.
+#[derive(Parser)]
+struct Args {
+    /// The simulator's recordings, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "steady,slow,cuts,call")]
+    recordings: Vec<String>,
+    /// Target presets, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "studio,sunset,left-key")]
+    targets: Vec<String>,
+    /// Frames of each recording.
+    #[arg(long, default_value_t = 300)]
+    frames: usize,
+    /// The face filmed without sensor noise.
+    #[arg(long)]
+    clean: bool,
+    /// Also TecoGAN's tOF (classical optical flow; slow).
+    #[arg(long)]
+    flow: bool,
+    /// An element property, as property=value; repeatable, set in order.
+    #[arg(long = "set", value_name = "PROPERTY=VALUE", value_parser = property_value)]
+    sets: Vec<(String, String)>,
+}
+
+/// `property=value`, split.
+fn property_value(text: &str) -> Result<(String, String), String> {
+    text.split_once('=')
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .ok_or_else(|| format!("{text}: expected property=value"))
+}
+
 fn main() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let list = |name: &str, default: &str| -> Vec<String> {
-        flag(name)
-            .unwrap_or_else(|| default.into())
-            .split(',')
-            .map(str::to_string)
-            .collect()
-    };
-    let recordings = list("--recordings", "steady,slow,cuts,call");
-    let targets = list("--targets", "studio,sunset,left-key");
-    let frames: usize = flag("--frames")
-        .map(|f| f.parse().map_err(|_| "bad --frames"))
-        .transpose()?
-        .unwrap_or(300);
-    let clean = args.iter().any(|a| a == "--clean");
-    let flow = args.iter().any(|a| a == "--flow");
-    // Every `--set property=value`, in order.
-    let sets: Vec<(String, String)> = args
-        .windows(2)
-        .filter(|w| w[0] == "--set")
-        .map(|w| {
-            w[1].split_once('=')
-                .map(|(k, v)| (k.to_string(), v.to_string()))
-                .ok_or_else(|| format!("--set {}: expected property=value", w[1]))
-        })
-        .collect::<Result<_, _>>()?;
+    let Args {
+        recordings,
+        targets,
+        frames,
+        clean,
+        flow,
+        sets,
+    } = Args::parse();
     let props: Vec<(&str, &str)> = sets.iter().map(|(k, v)| (k.as_str(), v.as_str())).collect();
 
     println!(

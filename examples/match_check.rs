@@ -33,15 +33,14 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+use clap::Parser;
 use deskstage::io::Y4mReader;
 use gst::prelude::*;
 use gst_video::prelude::*;
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::monitor_match::{Component, Features, MatchSettings, MatchWindow, Verdict};
-use lsydrelight_testkit::{
-    checkout, default_model, flags::flag, init, recording::ensure_recording,
-};
+use lsydrelight_testkit::{checkout, default_model, init, recording::ensure_recording};
 
 /// Window lengths measured, seconds.
 const WINDOWS: [f64; 4] = [1.0, 2.0, 3.0, 5.0];
@@ -297,25 +296,46 @@ fn roc(positive: &[f64], negative: &[f64]) -> Vec<(f64, f64, f64)> {
     curve
 }
 
+/// Measures the monitor-match check on simulator recordings: genuine pairings
+/// against swapped and delayed screens, per window length.
+#[derive(Parser)]
+struct Args {
+    /// Frames of each recording.
+    #[arg(long, default_value_t = 300)]
+    frames: usize,
+    /// Where the recordings are kept (default: target/recordings).
+    #[arg(long)]
+    dir: Option<PathBuf>,
+    /// Where the results go (default: results/match_check).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The model folder (default: the element's default model).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// The simulator's recordings, comma-separated.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "cuts,slow,call,walkaway,steady"
+    )]
+    recordings: Vec<String>,
+}
+
 fn main() -> Result<(), String> {
-    let frames: usize = flag("--frames")
-        .map(|f| f.parse().map_err(|_| "bad --frames"))
-        .transpose()?
-        .unwrap_or(300);
-    let dir = flag("--dir")
-        .map(PathBuf::from)
+    let args = Args::parse();
+    let frames = args.frames;
+    let dir = args
+        .dir
         .unwrap_or_else(|| checkout().join("target/recordings"));
-    let out = flag("--out")
-        .map(PathBuf::from)
+    let out = args
+        .out
         .unwrap_or_else(|| checkout().join("results/match_check"));
-    let model = flag("--model")
-        .map(PathBuf::from)
-        .unwrap_or_else(default_model);
-    let names = flag("--recordings").unwrap_or_else(|| "cuts,slow,call,walkaway,steady".into());
+    let model = args.model.unwrap_or_else(default_model);
+    let names = args.recordings;
     let settings = MatchSettings::default();
 
     let mut recordings = Vec::new();
-    for name in names.split(',') {
+    for name in &names {
         let dir = dir.join(format!("{name}-{frames}"));
         ensure_recording(&dir, name, frames)?;
         let fps = Y4mReader::open(&dir.join("face.y4m"))
@@ -449,6 +469,7 @@ fn main() -> Result<(), String> {
             }),
         );
     }
+    let names = names.join(",");
     let command = format!(
         "cargo run --release --example match_check -- --frames {frames} --recordings {names}"
     );

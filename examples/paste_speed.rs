@@ -30,6 +30,8 @@
 
 use std::time::Instant;
 
+use clap::Parser;
+
 use gstlsydrelight::frame::{
     Crop, DetailDenoiser, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
 };
@@ -92,24 +94,20 @@ fn summary(times: &mut [f64]) -> String {
     )
 }
 
+/// Times the crop, the denoising, the paste and a monitor frame's light on
+/// synthetic frames of every size and format.
+#[derive(Parser)]
+struct Args {
+    /// Rounds, each timing every case once.
+    #[arg(long, default_value_t = 41)]
+    rounds: usize,
+    /// Only the cases whose name contains this ("720p I420", "Bgrx").
+    #[arg(long, default_value = "")]
+    only: String,
+}
+
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let mut rounds = 41;
-    let mut only = String::new();
-    while let Some(arg) = args.next() {
-        match arg.as_str() {
-            "--rounds" => {
-                rounds = args
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .expect("--rounds N")
-            }
-            "--only" => only = args.next().expect("--only NAME"),
-            other => {
-                panic!("unknown argument {other}; usage: paste_speed [--rounds N] [--only NAME]")
-            }
-        }
-    }
+    let Args { rounds, only } = Args::parse();
 
     let mut cases: Vec<Case> = Vec::new();
     let mut thread_ms = Vec::with_capacity(rounds * THREAD_STARTS);

@@ -21,33 +21,58 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
+
 use lsydrelight_testkit::{
     checkout,
-    flags::flag,
     footage::Format,
     init,
     scorecard::{Setup, report},
 };
 
+/// Real faces with no monitor stream, scored with measures that need no ground truth.
+#[derive(Parser)]
+struct Args {
+    /// The real portraits and clips (default: target/real-media, from set-up).
+    #[arg(long)]
+    media: Option<PathBuf>,
+    /// Where the report and images go (default: results/real).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// The target light image (default: models/targets/sunset.png).
+    #[arg(long)]
+    target: Option<PathBuf>,
+    /// The model folder (default: the element's default model).
+    #[arg(long)]
+    model: Option<PathBuf>,
+    /// Frames of each clip.
+    #[arg(long, default_value_t = 90)]
+    frames: usize,
+    /// The format fed to the element: RGB or I420.
+    #[arg(long, default_value = "RGB", value_parser = Format::parse)]
+    format: Format,
+    /// The element's `denoise`.
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    denoise: bool,
+}
+
 fn main() -> Result<(), String> {
     let root = checkout();
-    let media = flag("--media").map_or_else(|| root.join("target/real-media"), PathBuf::from);
-    let out = flag("--out").map_or_else(|| root.join("results/real"), PathBuf::from);
-    let target =
-        flag("--target").map_or_else(|| root.join("models/targets/sunset.png"), PathBuf::from);
-    let model = flag("--model").map_or_else(gstlsydrelight::paths::default_model, PathBuf::from);
-    let frames: usize =
-        flag("--frames").map_or(Ok(90), |v| v.parse().map_err(|_| "bad --frames"))?;
-    let format = flag("--format").map_or(Ok(Format::Rgb), |f| Format::parse(&f))?;
+    let args = Args::parse();
+    let media = args.media.unwrap_or_else(|| root.join("target/real-media"));
+    let out = args.out.unwrap_or_else(|| root.join("results/real"));
+    let target = args
+        .target
+        .unwrap_or_else(|| root.join("models/targets/sunset.png"));
+    let model = args
+        .model
+        .unwrap_or_else(gstlsydrelight::paths::default_model);
+    let frames = args.frames;
     let setup = Setup {
         model: &model,
         target: &target,
-        format,
-        denoise: match flag("--denoise").as_deref() {
-            None | Some("true") => true,
-            Some("false") => false,
-            Some(other) => return Err(format!("--denoise {other}: true or false")),
-        },
+        format: args.format,
+        denoise: args.denoise,
     };
     init();
     print!("{}", report(&setup, &media, frames, &out)?);

@@ -9,39 +9,27 @@
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+use clap::Parser;
 use gst::prelude::*;
 use gst_video::prelude::*;
 use lsydrelight_testkit::init;
 
+/// One frame of several videos side by side in a PNG.
+#[derive(Parser)]
 struct Args {
+    /// The videos, left to right.
+    #[arg(required = true)]
     videos: Vec<PathBuf>,
+    /// The PNG to write.
+    #[arg(long)]
     out: PathBuf,
+    /// The frame taken from each video.
+    #[arg(long, default_value_t = 150)]
     frame: usize,
 }
 
-fn parse() -> Result<Args, String> {
-    let mut a = Args {
-        videos: Vec::new(),
-        out: PathBuf::new(),
-        frame: 150,
-    };
-    let mut it = std::env::args().skip(1);
-    while let Some(k) = it.next() {
-        match k.as_str() {
-            "--out" => a.out = it.next().ok_or("--out needs a file")?.into(),
-            "--frame" => {
-                a.frame = it
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .ok_or("--frame takes a number")?
-            }
-            _ if k.starts_with("--") => return Err(format!("unknown argument {k}")),
-            _ => a.videos.push(k.into()),
-        }
-    }
-    if a.out.as_os_str().is_empty() || a.videos.is_empty() {
-        return Err("usage: side_by_side [--frame N] --out FILE.png VIDEO...".into());
-    }
+fn checked_args() -> Result<Args, String> {
+    let a = Args::parse();
     if let Some(missing) = a.videos.iter().find(|p| !p.exists()) {
         return Err(format!("{} does not exist", missing.display()));
     }
@@ -153,7 +141,7 @@ fn frame_of(video: &Path, index: usize) -> Result<(usize, usize, Vec<u8>), Strin
 }
 
 fn main() -> Result<(), String> {
-    let a = parse()?;
+    let a = checked_args()?;
     init();
     let panels = a
         .videos

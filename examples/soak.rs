@@ -9,13 +9,14 @@
 
 use std::time::Instant;
 
+use clap::Parser;
 use deskstage::content::{Clip, Playlist};
 use deskstage::dataset::Recording;
 use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
-use lsydrelight_testkit::{default_model, flags::flag, person::network_input};
+use lsydrelight_testkit::{default_model, person::network_input};
 
 fn rss_mb() -> f64 {
     std::fs::read_to_string("/proc/self/status")
@@ -33,14 +34,24 @@ fn rss_mb() -> f64 {
         .map_or(0.0, |kb| kb / 1024.0)
 }
 
+/// A long soak of the stateful engine: NaN, range, memory and drift.
+#[derive(Parser)]
+struct Args {
+    /// Frames to run.
+    #[arg(long, default_value_t = 100_000)]
+    frames: usize,
+    /// The network's threads.
+    #[arg(long, default_value_t = 2)]
+    threads: usize,
+    /// The model folder (default: the element's default model).
+    #[arg(long)]
+    model: Option<std::path::PathBuf>,
+}
+
 fn main() -> Result<(), String> {
-    let frames: usize =
-        flag("--frames").map_or(Ok(100_000), |v| v.parse().map_err(|_| "bad --frames"))?;
-    let threads: usize =
-        flag("--threads").map_or(Ok(2), |v| v.parse().map_err(|_| "bad --threads"))?;
-    let model = flag("--model")
-        .map(std::path::PathBuf::from)
-        .unwrap_or_else(default_model);
+    let args = Args::parse();
+    let (frames, threads) = (args.frames, args.threads);
+    let model = args.model.unwrap_or_else(default_model);
 
     let env = engine::environment(&paths::default_ort_library()).map_err(|e| e.to_string())?;
     let network = Relighter::new(env, &model, threads, Provider::Cpu).map_err(|e| e.to_string())?;

@@ -13,6 +13,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
+use clap::{Parser, Subcommand};
 use deskstage::content::{FRAME_HEIGHT, FRAME_WIDTH};
 use deskstage::dataset::{Recording, RecordingSpec, light_of};
 use deskstage::math::Vec3;
@@ -25,23 +26,43 @@ use gstlsydrelight::targets::{Panorama, Preset, View};
 use lsydrelight_testkit::{
     checkout, default_model,
     element::{element, stat},
-    flags::flag,
     person::render_person,
     recording::score_recording,
     video::{FRAME, buffer, frame_time, rgb_caps, to_rgb},
 };
 
+/// Every kind of target light, shown and measured.
+#[derive(Parser)]
+struct Args {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// The contact sheet of the presets, as a PNG.
+    Sheet { out: PathBuf },
+    /// How an environment map becomes a monitor light, as a PNG.
+    Projection { out: PathBuf },
+    /// The error of relighting to each target against the simulator's exact ground truth.
+    Measure {
+        /// Frames of the `call` recording.
+        #[arg(long, default_value_t = 60)]
+        frames: usize,
+        /// The model folder (default: the element's default model).
+        #[arg(long)]
+        model: Option<PathBuf>,
+    },
+    /// What target changes and video targets cost.
+    Timing,
+}
+
 fn main() -> Result<(), String> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let out = args.get(1).map(PathBuf::from);
-    match args.first().map(String::as_str) {
-        Some("sheet") => sheet(&out.ok_or("sheet OUT.png")?),
-        Some("projection") => projection(&out.ok_or("projection OUT.png")?),
-        Some("measure") => measure(),
-        Some("timing") => timing(),
-        _ => {
-            Err("usage: target_lights sheet OUT.png | projection OUT.png | measure | timing".into())
-        }
+    match Args::parse().command {
+        Command::Sheet { out } => sheet(&out),
+        Command::Projection { out } => projection(&out),
+        Command::Measure { frames, model } => measure(frames, &model.unwrap_or_else(default_model)),
+        Command::Timing => timing(),
     }
 }
 
@@ -271,12 +292,7 @@ fn measured_targets(map: &Path) -> Vec<Measured> {
 
 /// Relights the simulator's `call` recording to every preset and to the outdoor
 /// map at four yaws, and scores each against the exact render under that light.
-fn measure() -> Result<(), String> {
-    let frames: usize =
-        flag("--frames").map_or(Ok(60), |f| f.parse().map_err(|_| "bad --frames"))?;
-    let model = flag("--model")
-        .map(PathBuf::from)
-        .unwrap_or_else(default_model);
+fn measure(frames: usize, model: &Path) -> Result<(), String> {
     let dir = checkout().join(format!("target/tmp/targets-call-{frames}"));
     let map = dir.join("outdoor.exr");
     write_exr(512, &map)?;

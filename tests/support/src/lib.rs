@@ -15,14 +15,12 @@
 //! - [`scorecard`]: those measures on real clips and recordings, as the report
 //!   `examples/real_footage` prints and `examples/benchmark --quality` writes;
 //! - [`flow`]: classical optical flow, and TecoGAN's tOF built on it;
-//! - [`flags`]: the examples' command-line flags.
 //!
 //! The checkout's paths and registering the plugin are here at the top.
 
 use std::path::{Path, PathBuf};
 
 pub mod element;
-pub mod flags;
 pub mod flow;
 pub mod footage;
 pub mod person;
