@@ -521,12 +521,26 @@ fn weighted_sum(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
     // on the build machine. The default x86-64 target only assumes SSE2, so
     // the same loop is built a second time for AVX2 and chosen at run time
     // (a cached check).
+    // Where the CPU has AVX-512, a third build takes 16 lanes a vector.
+    #[cfg(target_arch = "x86_64")]
+    if has_avx512() {
+        // SAFETY: the CPU has AVX-512 F, BW and VL, checked just above.
+        return unsafe { weighted_sum_avx512(sums, rows, weights) };
+    }
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.
         return unsafe { weighted_sum_avx2(sums, rows, weights) };
     }
     weighted_sum_portable(sums, rows, weights)
+}
+
+/// Whether the CPU has the AVX-512 subsets the AVX-512 builds are built for.
+#[cfg(target_arch = "x86_64")]
+fn has_avx512() -> bool {
+    std::arch::is_x86_feature_detected!("avx512f")
+        && std::arch::is_x86_feature_detected!("avx512bw")
+        && std::arch::is_x86_feature_detected!("avx512vl")
 }
 
 /// `weighted_sum_portable` built for AVX2.
@@ -536,7 +550,15 @@ fn weighted_sum_avx2(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
     weighted_sum_portable(sums, rows, weights)
 }
 
-// Always inlined, so that `weighted_sum_avx2` holds a copy built for AVX2.
+/// `weighted_sum_portable` built for AVX-512.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2")]
+fn weighted_sum_avx512(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
+    weighted_sum_portable(sums, rows, weights)
+}
+
+// Always inlined, so that `weighted_sum_avx2` and `weighted_sum_avx512` hold
+// copies built for them.
 #[inline(always)]
 fn weighted_sum_portable(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
     // A block of lanes at a time through all the rows, rather than one row at

@@ -243,10 +243,7 @@ impl Build {
             if std::arch::is_x86_feature_detected!("avx2") {
                 builds.push(Build::Avx2);
             }
-            if std::arch::is_x86_feature_detected!("avx512f")
-                && std::arch::is_x86_feature_detected!("avx512bw")
-                && std::arch::is_x86_feature_detected!("avx512vl")
-            {
+            if super::has_avx512() {
                 builds.push(Build::Avx512);
             }
         }

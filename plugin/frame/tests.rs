@@ -460,6 +460,21 @@ fn both_builds_of_the_inner_loops_agree() {
     weighted_sum(&mut chosen, &rows, &weights);
     weighted_sum_portable(&mut portable, &rows, &weights);
     assert_eq!(bits(&chosen), bits(&portable));
+    // Every build this CPU can run, not only the one chosen.
+    #[cfg(target_arch = "x86_64")]
+    {
+        let mut built = vec![0.0; n / 3];
+        if std::arch::is_x86_feature_detected!("avx2") {
+            // SAFETY: the CPU has AVX2, checked just above.
+            unsafe { weighted_sum_avx2(&mut built, &rows, &weights) };
+            assert_eq!(bits(&built), bits(&portable), "AVX2");
+        }
+        if has_avx512() {
+            // SAFETY: the CPU has AVX-512 F, BW and VL, checked just above.
+            unsafe { weighted_sum_avx512(&mut built, &rows, &weights) };
+            assert_eq!(bits(&built), bits(&portable), "AVX-512");
+        }
+    }
 }
 
 // The change as a gain field over the frame.
