@@ -24,7 +24,7 @@
 //!
 //! ```text
 //! cargo run --release --example match_check -- [--frames 300] [--dir target/recordings]
-//!     [--recordings cuts,slow,call,walkaway,steady] [--out results/match_check]
+//!     [--recordings cuts,slow,call,walkaway,steady] [--out results/match_check] [--model DIR]
 //! ```
 //!
 //! Writes `<out>/table.md` and `<out>/results.json`; `results/match_check/plot.py`

@@ -101,13 +101,14 @@ struct Args {
     /// Rounds, each timing every case once.
     #[arg(long, default_value_t = 41)]
     rounds: usize,
-    /// Only the cases whose name contains this ("720p I420", "Bgrx").
-    #[arg(long, default_value = "")]
-    only: String,
+    /// Only the cases whose name contains this ("720p I420", "Bgrx"); all by default.
+    #[arg(long)]
+    only: Option<String>,
 }
 
 fn main() {
     let Args { rounds, only } = Args::parse();
+    let only = only.unwrap_or_default();
 
     let mut cases: Vec<Case> = Vec::new();
     let mut thread_ms = Vec::with_capacity(rounds * THREAD_STARTS);

@@ -552,7 +552,7 @@ fn weighted_sum_avx2(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
 
 /// `weighted_sum_portable` built for AVX-512.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2")]
+#[target_feature(enable = "avx512f,avx512bw,avx512vl")]
 fn weighted_sum_avx512(sums: &mut [f32], rows: &[&[u8]], weights: &[f32]) {
     weighted_sum_portable(sums, rows, weights)
 }

@@ -238,16 +238,23 @@ impl Build {
     /// The builds this CPU can run, the widest last.
     fn available() -> Vec<Build> {
         let mut builds = vec![Build::Portable];
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::arch::is_x86_feature_detected!("avx2") {
-                builds.push(Build::Avx2);
-            }
-            if super::has_avx512() {
-                builds.push(Build::Avx512);
-            }
-        }
+        builds.extend(Build::vector_builds());
         builds
+    }
+
+    /// The builds for this CPU's vector extensions.
+    #[cfg(target_arch = "x86_64")]
+    fn vector_builds() -> Vec<Build> {
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        [(avx2, Build::Avx2), (super::has_avx512(), Build::Avx512)]
+            .into_iter()
+            .filter_map(|(has, build)| has.then_some(build))
+            .collect()
+    }
+
+    #[cfg(not(target_arch = "x86_64"))]
+    fn vector_builds() -> Vec<Build> {
+        Vec::new()
     }
 
     fn widest() -> Build {
@@ -667,7 +674,7 @@ impl Half<'_> {
 
     /// `walk_portable` built for AVX-512.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512bw,avx512vl,avx2")]
+    #[target_feature(enable = "avx512f,avx512bw,avx512vl")]
     fn walk_avx512(self, disc: &Disc, s: &mut Scratch) {
         self.walk_portable(disc, s)
     }
@@ -960,7 +967,7 @@ fn lane_of<const BYTES: usize>(pixels: &[u8], lane: usize, out: &mut [u8]) {
     // Samples of 2 and 4 bytes are read as whole words and the lane shifted
     // down: a shift and a narrowing a vector. Picked by index, the compiler
     // sometimes gathered the bytes one at a time (one `vpinsrb` each), which
-    // made packed RGB's denoising 10% slower or not by the build's luck.
+    // made BGRx's denoising 10% slower or not by the build's luck.
     let shift = 8 * lane;
     match BYTES {
         2 => {
@@ -1182,11 +1189,18 @@ fn band(smooth: f32) -> usize {
 /// level at its smooth value, `inverse` being 1 over the noise per band.
 #[inline(always)]
 fn over_noise(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
+    // Chosen at run time in every build of the walk, the portable one too.
     #[cfg(target_arch = "x86_64")]
     if std::arch::is_x86_feature_detected!("avx2") {
         // SAFETY: the CPU has AVX2, checked just above.
         return unsafe { over_noise_avx2(motion, smooth, inverse) };
     }
+    over_noise_plain(motion, smooth, inverse);
+}
+
+/// `over_noise` a sample at a time.
+#[inline(always)]
+fn over_noise_plain(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
     for (m, &s) in motion.iter_mut().zip(smooth) {
         *m *= inverse[band(s)];
     }
@@ -1221,9 +1235,7 @@ fn over_noise_avx2(motion: &mut [f32], smooth: &[f32], inverse: &[f32; BANDS]) {
         }
     }
     let done = n - n % LANES;
-    for (m, &s) in motion[done..].iter_mut().zip(&smooth[done..]) {
-        *m *= inverse[band(s)];
-    }
+    over_noise_plain(&mut motion[done..], &smooth[done..], inverse);
 }
 
 /// Share of the new frame's detail at a local mean squared difference of

@@ -382,9 +382,9 @@ fn layouts_match_the_reference() {
 }
 
 #[test]
-fn both_builds_of_the_inner_loops_agree() {
+fn every_build_of_the_inner_loops_agrees() {
     // The tests above run whichever build of `gain_row`, `chroma_change` and `weighted_sum` the
-    // CPU takes (AVX2 on the build machine); this holds the other to it.
+    // CPU takes (AVX2 or AVX-512); this holds the others to it.
     let mut noise = Noise(0xa1b2);
     let n = 1000 + 7;
     let mut map = |lo, hi| -> Vec<f32> { (0..n).map(|_| noise.uniform(lo, hi)).collect() };
@@ -460,16 +460,17 @@ fn both_builds_of_the_inner_loops_agree() {
     weighted_sum(&mut chosen, &rows, &weights);
     weighted_sum_portable(&mut portable, &rows, &weights);
     assert_eq!(bits(&chosen), bits(&portable));
-    // Every build this CPU can run, not only the one chosen.
+    // Every build this CPU can run, not only the one chosen, each into fresh sums.
     #[cfg(target_arch = "x86_64")]
     {
-        let mut built = vec![0.0; n / 3];
         if std::arch::is_x86_feature_detected!("avx2") {
+            let mut built = vec![0.0; n / 3];
             // SAFETY: the CPU has AVX2, checked just above.
             unsafe { weighted_sum_avx2(&mut built, &rows, &weights) };
             assert_eq!(bits(&built), bits(&portable), "AVX2");
         }
         if has_avx512() {
+            let mut built = vec![0.0; n / 3];
             // SAFETY: the CPU has AVX-512 F, BW and VL, checked just above.
             unsafe { weighted_sum_avx512(&mut built, &rows, &weights) };
             assert_eq!(bits(&built), bits(&portable), "AVX-512");

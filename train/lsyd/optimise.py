@@ -185,11 +185,13 @@ def _adain(g: onnx.GraphProto, norm: onnx.NodeProto, producer: dict, consumers: 
         return node.input[1] if node.input[0] == t else node.input[0]
 
     def sliced_from(t: str) -> onnx.NodeProto | None:
-        """The Slice a [1, C, 1, 1] tensor was unsqueezed from."""
-        n = producer.get(t)
+        """The Slice a [1, C, 1, 1] tensor was unsqueezed from (on axes 2 and 3)."""
+        n, axes = producer.get(t), []
         while n is not None and n.op_type == "Unsqueeze":
+            value = _constant(g, n.input[1]) if len(n.input) > 1 else None
+            axes += [] if value is None else value.ravel().tolist()
             n = producer.get(n.input[0])
-        return n if n is not None and n.op_type == "Slice" else None
+        return n if n is not None and n.op_type == "Slice" and sorted(axes) == [2, 3] else None
 
     scale, bias = (_constant(g, t) for t in norm.input[1:3])
     if scale is None or bias is None or not (np.all(scale == 1) and np.all(bias == 0)):
@@ -212,13 +214,22 @@ def _adain(g: onnx.GraphProto, norm: onnx.NodeProto, producer: dict, consumers: 
     start = _constant(g, gamma.input[1])
     if gemm is None or gemm.op_type != "Gemm" or start is None or start.ravel().tolist() != [0]:
         return None
+    rows = _constant(g, gemm.input[1])
+    width = None if rows is None else rows.shape[0 if _attrs(gemm).get("transB", 0) else 1]
+    if width not in (None, 2 * scale.size):
+        return None
     return mul, add, gamma.input[0], scale.size
 
 
 def adain_into_norms(model: onnx.ModelProto) -> list[str]:
     """Folds, in place, every AdaIN's scale and shift into its instance normalisation's scale
     and bias inputs, and drops the operations left unused (see the module's notes). Returns
-    the folded normalisations' names."""
+    the folded normalisations' names.
+
+    The match follows ``model.AdaIN`` as exported at batch 1 (``torch.chunk`` into gamma, then
+    beta). Beta's slice starts where ``chunk``'s shape arithmetic says at run time, which the
+    match does not evaluate; ``optimise_file`` checks every rewrite against the original graph
+    before it writes one."""
     g = model.graph
     producer = {o: n for n in g.node for o in n.output}
     consumers: dict[str, list[onnx.NodeProto]] = {}

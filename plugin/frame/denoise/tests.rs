@@ -291,7 +291,8 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
     // frame's edge, fades, disappears and comes back, and a reset: the fast
     // denoiser must match the plain one's bytes exactly, and its filtered
     // detail and noise level, which carry into every later frame, in every
-    // build of the walk this CPU can run (portable, AVX2, AVX-512). Walked
+    // build of the walk this CPU can run (portable, AVX2, AVX-512; the noise
+    // band's lookup picks its own build within each, tested below). Walked
     // whole on one thread, and split in halves on two, down to faces so small
     // that an area is a few rows and the rows copied beyond a half reach
     // past the area's edge.
@@ -356,4 +357,31 @@ fn the_denoising_gives_the_bytes_and_detail_of_the_plain_one() {
         fewest_rows <= EDGE_ROWS,
         "the smallest area has {fewest_rows} rows: no half's copied rows reached past its edge"
     );
+}
+
+#[cfg(target_arch = "x86_64")]
+#[test]
+fn the_noise_band_lookup_in_avx2_is_the_plain_one_to_the_bit() {
+    if !std::arch::is_x86_feature_detected!("avx2") {
+        eprintln!("no AVX2 on this CPU: the vector lookup is not used");
+        return;
+    }
+    // Smooth values on every band's edges and beyond both ends, a length that
+    // leaves a tail, and ratios that are not all alike.
+    let mut smooth: Vec<f32> = (0..=BANDS)
+        .flat_map(|b| {
+            let edge = (b * LEVELS) as f32;
+            [edge - 0.5, edge - f32::EPSILON * edge, edge, edge + 0.25]
+        })
+        .collect();
+    smooth.extend([-3.0, -0.0, 255.0, 300.0, 1e9]);
+    let inverse: [f32; BANDS] = std::array::from_fn(|b| 1.0 / (1.5 + b as f32));
+    let motion: Vec<f32> = (0..smooth.len()).map(|i| 0.3 + i as f32 * 0.7).collect();
+    let (mut plain, mut avx2) = (motion.clone(), motion);
+    over_noise_plain(&mut plain, &smooth, &inverse);
+    // SAFETY: the CPU has AVX2, checked above.
+    unsafe { over_noise_avx2(&mut avx2, &smooth, &inverse) };
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    assert_eq!(bits(&avx2), bits(&plain));
+    assert_ne!(smooth.len() % 8, 0, "a tail past the whole vectors");
 }
