@@ -85,7 +85,7 @@ impl Format {
         match name {
             "RGB" => Ok(Format::Rgb),
             "I420" => Ok(Format::I420),
-            _ => Err(format!("--format {name}: RGB or I420")),
+            _ => Err("expected RGB or I420".into()),
         }
     }
 
