@@ -462,9 +462,11 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             )
         });
     }
-    // Precision.
-    for p in ["fp16", "int8"] {
-        let m = bench.join(format!("default-{p}"));
+    // Precision: the fp16 variant the Python side exports, the shipped int8 one.
+    for (p, m) in [
+        ("fp16", bench.join("default-fp16")),
+        ("int8", root.join("models/default-int8")),
+    ] {
         if m.join("model.json").exists() {
             v.push(Variant {
                 latency_sizes: vec![(1280, 720)],
@@ -529,12 +531,11 @@ const MAXINE_720P_MS: [(&str, f64); 3] = [("T4", 54.0), ("A40", 17.1), ("L40", 8
 
 /// Where the time goes at each size and format, every frame through the network,
 /// in `rounds` interleaved rounds; a markdown table of medians and min-max.
-fn stages(rounds: usize, only: &[String], threads: u32) -> Result<String, String> {
-    let default = checkout().join("models/default");
+fn stages(rounds: usize, only: &[String], threads: u32, model: &Path) -> Result<String, String> {
     let every_frame = Variant {
-        name: "default, every frame".into(),
+        name: "every frame".into(),
         group: "stages".into(),
-        model: default,
+        model: model.to_path_buf(),
         threads,
         properties: vec![("reuse-interval".into(), "1".into())],
         recordings: vec![],
@@ -566,10 +567,11 @@ fn stages(rounds: usize, only: &[String], threads: u32) -> Result<String, String
         .collect();
     let mut out = vec![
         format!(
-            "Per frame, every frame through the network, one frame in flight, network on \
+            "Per frame, every frame through the network (`{}`), one frame in flight, network on \
              {threads} thread(s); median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
              on this 2-core CPU. Published anchor, not measured here: NVIDIA Maxine video \
              relighting at 720p, {}.",
+            model.strip_prefix(checkout()).unwrap_or(model).display(),
             anchors.join(", ")
         ),
         String::new(),
@@ -965,6 +967,9 @@ struct Args {
     /// --stages: the network's threads.
     #[arg(long, default_value_t = 2)]
     threads: u32,
+    /// --stages: the model folder (default: models/default).
+    #[arg(long)]
+    model: Option<PathBuf>,
     /// --first-frame: pipeline starts (at least 2).
     #[arg(long, default_value_t = 7)]
     repeats: usize,
@@ -1005,7 +1010,14 @@ fn main() -> Result<(), String> {
         return Ok(());
     }
     let table = if args.stages {
-        Some(("stages.md", stages(args.rounds, &args.only, args.threads)?))
+        let model = args
+            .model
+            .clone()
+            .unwrap_or_else(|| checkout().join("models/default"));
+        Some((
+            "stages.md",
+            stages(args.rounds, &args.only, args.threads, &model)?,
+        ))
     } else if args.quality {
         Some(("quality.md", quality(args.frames)?))
     } else if args.reuse {

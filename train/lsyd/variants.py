@@ -1,15 +1,22 @@
 """Lower-precision variants of an exported model: fp16 weights and int8 quantisation.
 
     python -m lsyd.variants --model models/default --data data --out target/bench-models
-    python -m lsyd.variants --model models/starter --data data/starter --out target/variants \
-        --no-fp16 [--int8-stages delight decoder] --heldout data/starter/unseen/person-200 ...
+    python -m lsyd.variants --model models/default --data data --out target/variants --no-fp16 \
+        --validation data/validation --max-cost 0.5 [--heldout data/heldout]
 
 Both keep the contract's float32 inputs and outputs, so the element runs them
 unchanged. fp16 stores weights and computes in half precision where ONNX
-Runtime supports it; int8 is static QDQ quantisation (per-channel weights,
-activations calibrated on training frames, never on the held-out set), of every stage or
-of the ones named; ``--heldout`` scores fp32 and int8 on held-out sets and records both in
-the int8 manifest's ``metrics.heldout_rmse``.
+Runtime supports it. int8 is static QDQ quantisation of the convolutions of the
+delight and decoder stages (or those named with ``--int8-stages``): per-channel weights,
+activations calibrated on training frames, never on the held-out set. Everything
+else stays fp32: the decoder's image head, and the AdaIN's light-code arithmetic
+that gives the normalisations their scale and shift (see ``INT8_OPS``).
+
+``--validation`` chooses which convolutions to quantise: each is quantised alone and
+scored on the validation sets, and the cheapest are taken, in that order, as long as
+the whole variant's RMSE stays within ``--max-cost`` percent of fp32's
+(``choose_int8_convs``). ``--heldout`` then scores fp32 and int8 on held-out sets; both
+choices and scores go into the int8 manifest's ``metrics``.
 """
 
 from __future__ import annotations
@@ -18,6 +25,8 @@ import argparse
 import json
 import shutil
 import sys
+import tempfile
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -29,8 +38,10 @@ from . import contract, data
 
 # Bounds on the relit image's difference from fp32 (sRGB in [0, 1]): mean and max
 # absolute difference over held-out relightings. ``tests/test_variants.py`` holds
-# every variant to them. The shipped model measures fp16 7.5e-5 mean, 6.1e-4 max, and int8
-# 0.0038 mean (about one 8-bit level), 0.07 max (`pytest -s tests/test_variants.py`).
+# every variant to them. The shipped model measures fp16 7.4e-5 mean, 6.4e-4 max, and int8
+# 0.0024 mean (under one 8-bit level), 0.032 max on an AVX-512 VNNI Xeon (`pytest -s
+# tests/test_variants.py`; 0.0038 and 0.07 when every operation was quantised). The bounds
+# leave room for CPUs without VNNI, whose int8 kernels round differently.
 ERROR_BOUNDS = {"fp16": (0.0005, 0.005), "int8": (0.01, 0.1)}
 
 
@@ -85,20 +96,69 @@ def to_fp16(model: Path, out: Path) -> None:
         onnx.save(convert_float_to_float16(m, keep_io_types=True), str(out / contract.stage_file(stage)))
 
 
-def to_int8(
-    model: Path, out: Path, calibration: dict[str, list[dict]], stages: tuple[str, ...] = contract.STAGES
-) -> None:
-    """int8 ``stages`` (the others copied as they are, fp32)."""
+# Quantised in an int8 variant: convolutions, nothing else. Measured on the default model's
+# delight and decoder stages with the decoder's image head fp32 (validation / held-out RMSE, fp32
+# 7.737 / 8.273; CPU ms a run of the delight / decoder on 1 thread of an AVX-512 VNNI Xeon,
+# `benchmark stages`): every operation quantised, the AdaIN's light-code Gemm, add and split on
+# their way to the normalisations' scale and shift among them, 7.834 / 8.346 at 0.516 / 1.769 ms;
+# convolutions only 7.814 / 8.312 at 0.450 / 1.593 ms, where fp32 takes 0.817 / 2.03.
+INT8_OPS = ("Conv",)
+# Quantised unless told otherwise: the stages whose int8 convolutions were measured faster.
+# The encoder (0.967 fp32 against 0.970 int8 CPU ms a run, every operation int8) and the light
+# decoder (0.21 against 0.31) were not; the delight (0.817 to 0.451) and decoder (2.03 to 1.61) were.
+INT8_STAGES = ("delight", "decoder")
+# Stages whose output is an image; their image head stays fp32 (``image_heads``).
+IMAGE_STAGES = ("decoder", "light_decoder")
+
+
+def image_heads(model: onnx.ModelProto) -> list[str]:
+    """The convolutions that draw a stage's output: those from which an output of the graph is
+    reached without passing another convolution. Quantised, their output is 8-bit steps of its
+    calibrated range: with the decoder's int8 too, the delight and decoder stages' convolutions
+    cost +1.24% RMSE on the default model's validation set, against +0.99% with it fp32."""
+    producer = {o: n for n in model.graph.node for o in n.output}
+    heads, seen = [], set()
+    todo = [o.name for o in model.graph.output]
+    while todo:
+        node = producer.get(todo.pop())
+        if node is None or node.name in seen:
+            continue
+        seen.add(node.name)
+        if node.op_type == "Conv":
+            heads.append(node.name)
+        else:
+            todo.extend(node.input)
+    return heads
+
+
+def int8_candidates(model: Path, stages: tuple[str, ...] = INT8_STAGES) -> list[str]:
+    """The convolutions an int8 variant of ``stages`` may quantise: all but the image heads."""
+    names = []
+    for stage in stages:
+        graph = onnx.load(str(model / contract.stage_file(stage)))
+        heads = image_heads(graph) if stage in IMAGE_STAGES else []
+        names += [n.name for n in graph.graph.node if n.op_type in INT8_OPS and n.name not in heads]
+    return names
+
+
+def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]], convs: list[str] | None = None) -> None:
+    """int8 ``convs`` (by node name; ``int8_candidates()`` when None), each stage without one of
+    them copied as it is, fp32."""
+    convs = int8_candidates(model) if convs is None else convs
     _copy_manifest(model, out, "int8")
     for stage in contract.STAGES:
-        if stage not in stages:
-            shutil.copy(model / contract.stage_file(stage), out / contract.stage_file(stage))
+        path = model / contract.stage_file(stage)
+        mine = [n.name for n in onnx.load(str(path)).graph.node if n.name in convs]
+        if not mine:
+            shutil.copy(path, out / contract.stage_file(stage))
             continue
         quantize_static(
-            str(model / contract.stage_file(stage)),
+            str(path),
             str(out / contract.stage_file(stage)),
             _Reader(calibration[stage]),
             quant_format=QuantFormat.QDQ,
+            op_types_to_quantize=list(INT8_OPS),
+            nodes_to_quantize=mine,
             per_channel=True,
             # 7-bit weights: x86 CPUs without VNNI (AVX2 only, e.g. many AMD EPYC)
             # multiply u8 x s8 pairs into saturating 16-bit sums, which 8-bit
@@ -107,6 +167,39 @@ def to_int8(
             activation_type=QuantType.QUInt8,
             weight_type=QuantType.QInt8,
         )
+
+
+def choose_int8_convs(candidates: list[str], cost: Callable[[list[str]], float], max_cost: float) -> dict:
+    """Which ``candidates`` to quantise: each alone is scored by ``cost`` (the relative rise of the
+    validation error over fp32's), and the cheapest are taken in that order, the longest such
+    prefix whose whole cost is at most ``max_cost``. Quantisation errors of separate layers mostly
+    add, so the prefixes' costs rise with their length, and the longest is found by bisection
+    (its cost is measured, not assumed)."""
+    alone = {c: cost([c]) for c in candidates}
+    order = sorted(candidates, key=alone.__getitem__)
+    measured = {0: 0.0}
+
+    def prefix_cost(k: int) -> float:
+        if k not in measured:
+            measured[k] = cost(order[:k])
+        return measured[k]
+
+    lo, hi = 0, len(order)
+    if prefix_cost(hi) <= max_cost:
+        lo = hi
+    while hi - lo > 1:
+        mid = (lo + hi) // 2
+        if prefix_cost(mid) <= max_cost:
+            lo = mid
+        else:
+            hi = mid
+    return {
+        "quantised": order[:lo],
+        "kept_fp32": order[lo:],
+        "cost": measured[lo],
+        "cost_alone": alone,
+        "max_cost": max_cost,
+    }
 
 
 def calibration_frames(data_root: Path, resolution: int, count: int = 48) -> tuple[np.ndarray, np.ndarray]:
@@ -130,6 +223,19 @@ def heldout_rmse(folder: Path, sets: list[Path]) -> list[float]:
     return [benchmark.test_set_accuracy(folder, data.Heldout.load(s), ("rmse",))["rmse"] for s in sets]
 
 
+def validation_cost(model: Path, calibration: dict[str, list[dict]], sets: list[Path]) -> Callable[[list[str]], float]:
+    """The cost that ``choose_int8_convs`` minimises: how much higher the mean RMSE over ``sets``
+    is with the given convolutions int8 than with none, as a fraction of fp32's."""
+    fp32 = float(np.mean(heldout_rmse(model, sets)))
+
+    def cost(convs: list[str]) -> float:
+        with tempfile.TemporaryDirectory() as scratch:
+            to_int8(model, Path(scratch), calibration, convs)
+            return float(np.mean(heldout_rmse(Path(scratch), sets))) / fp32 - 1.0
+
+    return cost
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--model", type=Path, required=True)
@@ -139,10 +245,23 @@ def main() -> None:
         "--int8-stages",
         nargs="+",
         choices=contract.STAGES,
-        default=list(contract.STAGES),
-        help="the stages to quantise; the others stay fp32",
+        default=list(INT8_STAGES),
+        help="the stages whose convolutions may be quantised; the others stay fp32",
     )
     p.add_argument("--no-fp16", action="store_true", help="write the int8 variant only")
+    p.add_argument(
+        "--validation",
+        type=Path,
+        nargs="*",
+        default=[],
+        help="9 x 9 sets to choose the int8 convolutions on (never the held-out set)",
+    )
+    p.add_argument(
+        "--max-cost",
+        type=float,
+        default=0.5,
+        help="with --validation: the most the int8 variant may add to the validation RMSE, in percent",
+    )
     p.add_argument(
         "--heldout",
         type=Path,
@@ -157,21 +276,34 @@ def main() -> None:
         to_fp16(a.model, a.out / f"{a.model.name}-fp16")
         print(f"wrote {a.out / (a.model.name + '-fp16')}")
     int8 = a.out / f"{a.model.name}-int8"
-    to_int8(a.model, int8, chain_inputs(a.model, images, lights), tuple(a.int8_stages))
-    print(f"wrote {int8} (int8: {', '.join(a.int8_stages)})")
+    calibration = chain_inputs(a.model, images, lights)
+    convs = int8_candidates(a.model, tuple(a.int8_stages))
+    choice = None
+    if a.validation:
+        choice = choose_int8_convs(convs, validation_cost(a.model, calibration, a.validation), a.max_cost / 100)
+        convs = choice["quantised"]
+        print(
+            f"validation: {len(convs)} convolutions int8, RMSE +{100 * choice['cost']:.2f}%; "
+            f"fp32: {', '.join(choice['kept_fp32']) or 'none'}"
+        )
+    to_int8(a.model, int8, calibration, convs)
+    print(f"wrote {int8} (int8: {len(convs)} convolutions of {', '.join(a.int8_stages)})")
+    m = contract.read(int8 / "model.json")
+    m["metrics"]["int8"] = {
+        "command": "python -m lsyd.variants " + " ".join(sys.argv[1:]),
+        "calibration": f"{len(images)} frames of {a.data.name}/captures",
+        "quantised": convs,
+        **({"validation": {"sets": [s.name for s in a.validation], **choice}} if choice else {}),
+    }
     if a.heldout:
         scores = {"fp32": heldout_rmse(a.model, a.heldout), "int8": heldout_rmse(int8, a.heldout)}
-        m = contract.read(int8 / "model.json")
         m["metrics"]["heldout_rmse"] = {
-            "command": "python -m lsyd.variants " + " ".join(sys.argv[1:]),
             "sets": [s.name for s in a.heldout],
-            "int8_stages": a.int8_stages,
-            "calibration": f"{len(images)} frames of {a.data.name}/captures",
             **{k: {"sets": v, "mean": float(np.mean(v))} for k, v in scores.items()},
         }
-        contract.write(int8 / "model.json", m)
         for k, v in scores.items():
             print(f"{k}: held-out RMSE {np.mean(v):.4f} ({', '.join(f'{x:.4f}' for x in v)})")
+    contract.write(int8 / "model.json", m)
 
 
 if __name__ == "__main__":
