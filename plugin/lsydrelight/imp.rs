@@ -849,10 +849,11 @@ impl LsydRelight {
         gst::info!(
             CAT,
             imp = self,
-            "loaded model {} ({}x{}) with ONNX Runtime {}",
+            "loaded model {} ({}x{}, {}) with ONNX Runtime {}",
             relighter.manifest().name,
             relighter.resolution(),
             relighter.resolution(),
+            relighter.manifest().precision,
             settings.ort_library.display()
         );
         let region = FaceRegion::new(env, settings, relighter.manifest().crop).map_err(|e| {
