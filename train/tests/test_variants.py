@@ -83,14 +83,17 @@ def test_int8_quantises_convolutions_only_and_keeps_the_contract_and_the_image_h
         convs = [n for n in graph.node if n.op_type == "Conv"]
         int8 = [n.name for n in convs if producer.get(n.input[1]) == "DequantizeLinear"]
         assert int8, f"{stage} was not quantised"
-        # The image head draws the relit image in fp32: no 8-bit steps in the output.
-        heads = variants.image_heads(onnx.load(shipped_model / spec["file"])) if stage in variants.IMAGE_STAGES else []
-        assert sorted(int8) == sorted(n.name for n in convs if n.name not in heads), stage
+        # Every candidate and nothing else: not the image head, which draws the relit image in
+        # fp32 (no 8-bit steps in the output), nor the encoder's 3-channel stem.
+        assert sorted(int8) == sorted(set(variants.int8_candidates(shipped_model, (stage,)))), stage
+        assert "/decoder/out/Conv" not in int8 and "/encoder/stem/Conv" not in int8
         # The AdaIN's scale and shift reach the normalisations unquantised.
         for norm in (n for n in graph.node if n.op_type == "InstanceNormalization"):
             assert producer[norm.input[1]] == producer[norm.input[2]] == "Split", norm.name
     decoder = onnx.load(shipped_model / contract.stage_file("decoder"))
     assert variants.image_heads(decoder) == ["/decoder/out/Conv"]
+    # Of the 23 convolutions of the three stages, the two above stay fp32.
+    assert len(variants.int8_candidates(shipped_model)) == 21
     # The benchmark's check of a variant it times: close to the fp32 network, and refused when not.
     net = export.network_from_model(shipped_model)
     gen = torch.Generator().manual_seed(0)
