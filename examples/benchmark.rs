@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
-//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 2] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 2] [--model models/default] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
@@ -968,7 +968,7 @@ struct Args {
     #[arg(long, default_value_t = 2)]
     threads: u32,
     /// --stages: the model folder (default: models/default).
-    #[arg(long)]
+    #[arg(long, requires = "stages")]
     model: Option<PathBuf>,
     /// --first-frame: pipeline starts (at least 2).
     #[arg(long, default_value_t = 7)]

@@ -119,19 +119,15 @@ fn the_relit_call_flickers_less_than_the_camera() {
 }
 
 /// Issue 11: the shipped int8 variant (`models/default-int8`, `lsyd.variants`) loads in
-/// the element and relights the call within the half percent of RMSE its convolutions
-/// were chosen to (on the validation set, `metrics.int8.validation.max_cost`) over the
-/// fp32 default's model card figures, which `recorded_call_matches_the_model_card`
-/// holds the fp32 default to.
+/// the element and relights the call within half a percent of RMSE over the fp32 model
+/// run alike on this machine: the bound its convolutions were chosen to on the validation
+/// set (`metrics.int8.validation.max_rise_percent`). Measured: +0.24% to +0.26%.
 #[test]
 fn the_int8_variant_relights_the_call_within_half_a_percent_of_fp32() {
     let int8 = checkout().join("models/default-int8");
-    let manifest: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(default_model().join("model.json")).unwrap())
-            .unwrap();
-    let card = &manifest["metrics"]["element"]["call_90"]["targets"];
     for target in TARGETS {
-        let s = score_recording(
+        let fp32 = score_recording(call_90(), target, true, &[], false).unwrap();
+        let q = score_recording(
             call_90(),
             target,
             true,
@@ -139,12 +135,12 @@ fn the_int8_variant_relights_the_call_within_half_a_percent_of_fp32() {
             false,
         )
         .unwrap();
-        let fp32 = card[target]["rmse_region"].as_f64().unwrap();
-        assert_eq!(s.frames, 90);
+        assert_eq!(q.frames, 90);
         assert!(
-            s.rmse_region <= 1.005 * fp32,
-            "{target}: RMSE {:.4} in the face region with int8, {fp32:.4} with fp32 (model card)",
-            s.rmse_region
+            q.rmse_region <= 1.005 * fp32.rmse_region,
+            "{target}: RMSE {:.4} in the face region with int8, {:.4} with fp32",
+            q.rmse_region,
+            fp32.rmse_region
         );
     }
 }

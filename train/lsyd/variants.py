@@ -1,6 +1,6 @@
 """Lower-precision variants of an exported model: fp16 weights and int8 quantisation.
 
-    python -m lsyd.variants --model models/default --data data --out target/bench-models
+    python -m lsyd.variants --model models/default --data data --out target/variants
     python -m lsyd.variants --model models/default --data data --out target/variants --no-fp16 \
         --validation data/validation --max-cost 0.5 [--heldout data/heldout]
 
@@ -40,8 +40,9 @@ from . import contract, data
 # Bounds on the relit image's difference from fp32 (sRGB in [0, 1]): mean and max
 # absolute difference over held-out relightings. ``tests/test_variants.py`` holds
 # every variant to them. The shipped model measures fp16 7.4e-5 mean, 6.4e-4 max, and int8
-# 0.0024 mean (under one 8-bit level), 0.032 max on an AVX-512 VNNI Xeon (`pytest -s
-# tests/test_variants.py`; 0.0038 and 0.07 when every operation was quantised). The bounds
+# (every candidate convolution) 0.0028 mean (under one 8-bit level), 0.034 max on an AVX-512
+# VNNI Xeon (`pytest -s tests/test_variants.py`; 0.0038 and 0.07 when every operation of every
+# stage was quantised). The bounds
 # leave room for CPUs without VNNI, whose int8 kernels round differently.
 ERROR_BOUNDS = {"fp16": (0.0005, 0.005), "int8": (0.01, 0.1)}
 
@@ -106,9 +107,9 @@ def to_fp16(model: Path, out: Path) -> None:
 INT8_OPS = ("Conv",)
 # Quantised unless told otherwise: the stages whose int8 convolutions were measured faster
 # (CPU ms a run, 1 thread, default model): the encoder 0.968 to 0.793 (its stem aside, below),
-# the delight 0.817 to 0.451, the decoder 2.03 to 1.61. The light decoder (0.209 to 0.144 with
-# its three 1x1 convolutions int8) runs only when the source light is unknown, and the
-# validation cost, relit with the source known, cannot see its error; it stays fp32.
+# the delight 0.817 to 0.450, the decoder 2.03 to 1.593. The light decoder runs only when the
+# source light is unknown, and the validation cost, relit with the source known, cannot see its
+# error; it stays fp32 (all three of its 1x1 convolutions int8, a one-off run: 0.209 to 0.144).
 INT8_STAGES = ("encoder", "delight", "decoder")
 # Convolutions with fewer input channels stay fp32: the encoder's stem (3 channels, 7x7)
 # in int8 took the encoder from 0.968 to 1.040 ms instead of 0.793.
@@ -120,16 +121,17 @@ IMAGE_STAGES = ("decoder", "light_decoder")
 def image_heads(model: onnx.ModelProto) -> list[str]:
     """The convolutions that draw a stage's output: those from which an output of the graph is
     reached without passing another convolution. Quantised, their output is 8-bit steps of its
-    calibrated range: with the decoder's int8 too, the delight and decoder stages' convolutions
-    cost +1.24% RMSE on the default model's validation set, against +0.99% with it fp32."""
+    calibrated range: with the decoder's image head int8 too, the delight and decoder stages'
+    convolutions cost +1.24% RMSE on the default model's validation set, against +0.99% with
+    it fp32."""
     producer = {o: n for n in model.graph.node for o in n.output}
     heads, seen = [], set()
     todo = [o.name for o in model.graph.output]
     while todo:
         node = producer.get(todo.pop())
-        if node is None or node.name in seen:
+        if node is None or id(node) in seen:
             continue
-        seen.add(node.name)
+        seen.add(id(node))
         if node.op_type == "Conv":
             heads.append(node.name)
         else:
@@ -144,24 +146,37 @@ def int8_candidates(model: Path, stages: tuple[str, ...] = INT8_STAGES) -> list[
     for stage in stages:
         graph = onnx.load(str(model / contract.stage_file(stage)))
         heads = image_heads(graph) if stage in IMAGE_STAGES else []
-        inputs = {t.name: t.dims[1] for t in graph.graph.initializer if len(t.dims) == 4}
+        in_channels_per_group = {t.name: t.dims[1] for t in graph.graph.initializer if len(t.dims) == 4}
         names += [
             n.name
             for n in graph.graph.node
-            if n.op_type in INT8_OPS and n.name not in heads and inputs.get(n.input[1], 0) >= MIN_INT8_INPUTS
+            if n.op_type in INT8_OPS
+            and n.name not in heads
+            and in_channels_per_group.get(n.input[1], 0) >= MIN_INT8_INPUTS
         ]
     return names
 
 
+def quantised_convs(graph: onnx.GraphProto) -> list[str]:
+    """The convolutions of a QDQ graph whose weights are int8 (dequantised on their way in)."""
+    producer = {o: n.op_type for n in graph.node for o in n.output}
+    return [n.name for n in graph.node if n.op_type == "Conv" and producer.get(n.input[1]) == "DequantizeLinear"]
+
+
 def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]], convs: list[str] | None = None) -> None:
     """int8 ``convs`` (by node name; ``int8_candidates()`` when None), each stage without one of
-    them copied as it is, fp32."""
+    them copied as it is, fp32. A name no stage has, or more than one has, is an error."""
     convs = int8_candidates(model) if convs is None else convs
+    graphs = {stage: onnx.load(str(model / contract.stage_file(stage))).graph for stage in contract.STAGES}
+    for name in convs:
+        holders = [stage for stage, g in graphs.items() if any(n.name == name and n.op_type == "Conv" for n in g.node)]
+        if len(holders) != 1:
+            raise ValueError(f"{model}: convolution {name!r} is in {len(holders)} stages, not one; name one per stage")
     _copy_manifest(model, out, "int8")
     for stage in contract.STAGES:
         path = model / contract.stage_file(stage)
-        mine = [n.name for n in onnx.load(str(path)).graph.node if n.name in convs]
-        if not mine:
+        stage_convs = [n.name for n in graphs[stage].node if n.name in convs]
+        if not stage_convs:
             shutil.copy(path, out / contract.stage_file(stage))
             continue
         quantize_static(
@@ -170,7 +185,7 @@ def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]], convs: l
             _Reader(calibration[stage]),
             quant_format=QuantFormat.QDQ,
             op_types_to_quantize=list(INT8_OPS),
-            nodes_to_quantize=mine,
+            nodes_to_quantize=stage_convs,
             per_channel=True,
             # 7-bit weights: x86 CPUs without VNNI (AVX2 only, e.g. many AMD EPYC)
             # multiply u8 x s8 pairs into saturating 16-bit sums, which 8-bit
@@ -183,10 +198,13 @@ def to_int8(model: Path, out: Path, calibration: dict[str, list[dict]], convs: l
 
 def choose_int8_convs(candidates: list[str], cost: Callable[[list[str]], float], max_cost: float) -> dict:
     """Which ``candidates`` to quantise: each alone is scored by ``cost`` (the relative rise of the
-    validation error over fp32's), and the cheapest are taken in that order, the longest such
-    prefix whose whole cost is at most ``max_cost``. Quantisation errors of separate layers mostly
-    add, so the prefixes' costs rise with their length, and the longest is found by bisection
-    (its cost is measured, not assumed)."""
+    validation error over fp32's), and the cheapest are taken in that order, as many as keep the
+    whole variant's cost at most ``max_cost``. How many is found by bisection over the prefixes,
+    which assumes that a longer prefix costs more: quantisation errors of separate layers mostly
+    add, though a few layers alone lower the error a little. Every prefix the bisection settles
+    on is measured, not assumed; the empty one is fp32 (cost 0)."""
+    if max_cost < 0:
+        raise ValueError(f"max_cost is {max_cost}: a bound on the rise of the error cannot be negative")
     alone = {c: cost([c]) for c in candidates}
     order = sorted(candidates, key=alone.__getitem__)
     measured = {0: 0.0}
@@ -227,8 +245,8 @@ def calibration_frames(data_root: Path, resolution: int, count: int = 48) -> tup
     return np.concatenate(images)[:count], np.concatenate(lights)[:count]
 
 
-def heldout_rmse(folder: Path, sets: list[Path]) -> list[float]:
-    """Face-crop RMSE (0-255) of ``folder`` on each 9 x 9 held-out set, source light known:
+def set_rmse(folder: Path, sets: list[Path]) -> list[float]:
+    """Face-crop RMSE (0-255) of ``folder`` on each 9 x 9 set (held-out or validation), source light known:
     the benchmark's scorer (``benchmark.test_set_accuracy``), the same path for every precision."""
     from .evaluation import benchmark
 
@@ -238,12 +256,12 @@ def heldout_rmse(folder: Path, sets: list[Path]) -> list[float]:
 def validation_cost(model: Path, calibration: dict[str, list[dict]], sets: list[Path]) -> Callable[[list[str]], float]:
     """The cost that ``choose_int8_convs`` minimises: how much higher the mean RMSE over ``sets``
     is with the given convolutions int8 than with none, as a fraction of fp32's."""
-    fp32 = float(np.mean(heldout_rmse(model, sets)))
+    fp32 = float(np.mean(set_rmse(model, sets)))
 
     def cost(convs: list[str]) -> float:
         with tempfile.TemporaryDirectory() as scratch:
             to_int8(model, Path(scratch), calibration, convs)
-            return float(np.mean(heldout_rmse(Path(scratch), sets))) / fp32 - 1.0
+            return float(np.mean(set_rmse(Path(scratch), sets))) / fp32 - 1.0
 
     return cost
 
@@ -264,15 +282,13 @@ def main() -> None:
     p.add_argument(
         "--validation",
         type=Path,
-        nargs="*",
-        default=[],
+        nargs="+",
         help="9 x 9 sets to choose the int8 convolutions on (never the held-out set)",
     )
     p.add_argument(
         "--max-cost",
         type=float,
-        default=0.5,
-        help="with --validation: the most the int8 variant may add to the validation RMSE, in percent",
+        help="with --validation: the most the int8 variant may add to the validation RMSE, in percent (default 0.5)",
     )
     p.add_argument(
         "--heldout",
@@ -282,6 +298,18 @@ def main() -> None:
         help="9 x 9 held-out sets to score fp32 and int8 on (RMSE), recorded in the int8 manifest",
     )
     a = p.parse_args()
+    if a.max_cost is not None and not a.validation:
+        p.error("--max-cost bounds the choice on --validation sets; give them, or leave --max-cost out")
+    max_cost = 0.5 if a.max_cost is None else a.max_cost
+    if max_cost < 0:
+        p.error(f"--max-cost {max_cost}: give the most the error may rise, in percent, 0 or more")
+    convs = int8_candidates(a.model, tuple(a.int8_stages))
+    if not convs:
+        p.error(
+            f"{', '.join(a.int8_stages)}: no convolution to quantise (none, or only image heads and "
+            f"convolutions of fewer than {MIN_INT8_INPUTS} input channels); name other --int8-stages"
+        )
+    command = f"cd train && python -m lsyd.variants {' '.join(sys.argv[1:])}"
     res = contract.read(a.model / "model.json")["resolution"]
     images, lights = calibration_frames(a.data, res)
     if not a.no_fp16:
@@ -289,11 +317,17 @@ def main() -> None:
         print(f"wrote {a.out / (a.model.name + '-fp16')}")
     int8 = a.out / f"{a.model.name}-int8"
     calibration = chain_inputs(a.model, images, lights)
-    convs = int8_candidates(a.model, tuple(a.int8_stages))
-    choice = None
+    record = {"command": command, "calibration": f"{len(images)} frames of {a.data.name}/captures"}
     if a.validation:
-        choice = choose_int8_convs(convs, validation_cost(a.model, calibration, a.validation), a.max_cost / 100)
+        choice = choose_int8_convs(convs, validation_cost(a.model, calibration, a.validation), max_cost / 100)
         convs = choice["quantised"]
+        record["validation"] = {
+            "sets": [s.name for s in a.validation],
+            "max_rise_percent": max_cost,
+            "rise_percent": 100 * choice["cost"],
+            "rise_alone_percent": {c: 100 * v for c, v in choice["cost_alone"].items()},
+            "kept_fp32": choice["kept_fp32"],
+        }
         print(
             f"validation: {len(convs)} convolutions int8, RMSE +{100 * choice['cost']:.2f}%; "
             f"fp32: {', '.join(choice['kept_fp32']) or 'none'}"
@@ -301,15 +335,11 @@ def main() -> None:
     to_int8(a.model, int8, calibration, convs)
     print(f"wrote {int8} (int8: {len(convs)} convolutions of {', '.join(a.int8_stages)})")
     m = contract.read(int8 / "model.json")
-    m["metrics"]["int8"] = {
-        "command": "python -m lsyd.variants " + " ".join(sys.argv[1:]),
-        "calibration": f"{len(images)} frames of {a.data.name}/captures",
-        "quantised": convs,
-        **({"validation": {"sets": [s.name for s in a.validation], **choice}} if choice else {}),
-    }
+    m["metrics"]["int8"] = {**record, "quantised": convs}
     if a.heldout:
-        scores = {"fp32": heldout_rmse(a.model, a.heldout), "int8": heldout_rmse(int8, a.heldout)}
+        scores = {"fp32": set_rmse(a.model, a.heldout), "int8": set_rmse(int8, a.heldout)}
         m["metrics"]["heldout_rmse"] = {
+            "command": command,
             "sets": [s.name for s in a.heldout],
             **{k: {"sets": v, "mean": float(np.mean(v))} for k, v in scores.items()},
         }

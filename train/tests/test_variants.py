@@ -5,6 +5,7 @@ import numpy as np
 import onnx
 import pytest
 import torch
+from onnx import numpy_helper
 
 from lsyd import contract, data, export, variants
 
@@ -80,8 +81,7 @@ def test_int8_quantises_convolutions_only_and_keeps_the_contract_and_the_image_h
             continue
         graph = onnx.load(tmp_path / spec["file"]).graph
         producer = {o: n.op_type for n in graph.node for o in n.output}
-        convs = [n for n in graph.node if n.op_type == "Conv"]
-        int8 = [n.name for n in convs if producer.get(n.input[1]) == "DequantizeLinear"]
+        int8 = variants.quantised_convs(graph)
         assert int8, f"{stage} was not quantised"
         # Every candidate and nothing else: not the image head, which draws the relit image in
         # fp32 (no 8-bit steps in the output), nor the encoder's 3-channel stem.
@@ -124,6 +124,19 @@ def test_the_cheapest_convolutions_are_quantised_while_the_cost_stays_within_the
     assert everything["kept_fp32"] == [] and everything["cost"] == pytest.approx(0.0076)
     nothing = variants.choose_int8_convs(list(alone), cost, max_cost=0.00005)
     assert nothing["quantised"] == [] and nothing["cost"] == 0.0
+    # Each alone, then a bisection over the five prefixes: a handful of scorings, not all 31 sets.
+    calls.clear()
+    variants.choose_int8_convs(list(alone), cost, max_cost=0.0037)
+    assert len(calls) <= len(alone) + 4
+    with pytest.raises(ValueError, match="cannot be negative"):
+        variants.choose_int8_convs(list(alone), cost, max_cost=-0.001)
+
+
+def test_int8_refuses_a_convolution_no_stage_has(sim_data, shipped_model, tmp_path):
+    images, lights = variants.calibration_frames(sim_data, 96, count=2)
+    calibration = variants.chain_inputs(shipped_model, images, lights)
+    with pytest.raises(ValueError, match="'/decoder/no-such/Conv' is in 0 stages"):
+        variants.to_int8(shipped_model, tmp_path, calibration, ["/decoder/no-such/Conv"])
 
 
 @pytest.mark.parametrize("name", ["default", "starter"])
@@ -137,14 +150,23 @@ def test_each_shipped_int8_variant_is_made_from_its_shipped_model(sim_data, ship
     quantised = set(m["metrics"]["int8"]["quantised"])
     for stage, spec in m["stages"].items():
         graph = onnx.load(int8 / spec["file"]).graph
-        producer = {o: n.op_type for n in graph.node for o in n.output}
-        int8_convs = {
-            n.name for n in graph.node if n.op_type == "Conv" and producer.get(n.input[1]) == "DequantizeLinear"
-        }
+        int8_convs = set(variants.quantised_convs(graph))
         assert int8_convs <= quantised, stage
         if not int8_convs:
             assert (int8 / spec["file"]).read_bytes() == (model / spec["file"]).read_bytes(), stage
         quantised -= int8_convs
+        # Each int8 weight is the model's own, rounded to its channel's step.
+        weights = {t.name: numpy_helper.to_array(t) for t in onnx.load(model / spec["file"]).graph.initializer}
+        original = {
+            n.name: weights[n.input[1]] for n in onnx.load(model / spec["file"]).graph.node if n.op_type == "Conv"
+        }
+        stored = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+        producer = {o: n for n in graph.node for o in n.output}
+        for conv in (n for n in graph.node if n.name in int8_convs):
+            q, scale, zero = (stored[t] for t in producer[conv.input[1]].input)
+            step = scale.reshape(-1, 1, 1, 1)
+            restored = (q.astype(np.float32) - zero.reshape(-1, 1, 1, 1)) * step
+            assert np.all(np.abs(restored - original[conv.name]) <= 0.5001 * step), conv.name
     assert not quantised, f"in the manifest, not in the files: {quantised}"
     # A held-out face relit from one of its lights to another, within the bound every int8
     # variant is held to (a model retrained since relights it further off than that).
