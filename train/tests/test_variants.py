@@ -168,6 +168,8 @@ def test_each_shipped_int8_variant_is_made_from_its_shipped_model(sim_data, ship
             restored = (q.astype(np.float32) - zero.reshape(-1, 1, 1, 1)) * step
             assert np.all(np.abs(restored - original[conv.name]) <= 0.5001 * step), conv.name
     assert not quantised, f"in the manifest, not in the files: {quantised}"
+    # Its model card says what its manifest does.
+    assert (int8 / "README.md").read_text() == variants.int8_card(model, int8)
     # A held-out face relit from one of its lights to another, within the bound every int8
     # variant is held to (a model retrained since relights it further off than that).
     held = data.Heldout.load(sim_data / "heldout")
