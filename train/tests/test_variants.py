@@ -156,10 +156,9 @@ def test_each_shipped_int8_variant_is_made_from_its_shipped_model(sim_data, ship
             assert (int8 / spec["file"]).read_bytes() == (model / spec["file"]).read_bytes(), stage
         quantised -= int8_convs
         # Each int8 weight is the model's own, rounded to its channel's step.
-        weights = {t.name: numpy_helper.to_array(t) for t in onnx.load(model / spec["file"]).graph.initializer}
-        original = {
-            n.name: weights[n.input[1]] for n in onnx.load(model / spec["file"]).graph.node if n.op_type == "Conv"
-        }
+        fp32 = onnx.load(model / spec["file"]).graph
+        weights = {t.name: numpy_helper.to_array(t) for t in fp32.initializer}
+        original = {n.name: weights[n.input[1]] for n in fp32.node if n.op_type == "Conv"}
         stored = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
         producer = {o: n for n in graph.node for o in n.output}
         for conv in (n for n in graph.node if n.name in int8_convs):
