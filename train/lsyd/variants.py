@@ -9,9 +9,10 @@ unchanged. fp16 stores weights and computes in half precision where ONNX
 Runtime supports it. int8 is static QDQ quantisation of the convolutions of the
 encoder, delight and decoder stages (or those named with ``--int8-stages``): per-channel
 weights, activations calibrated on training frames, never on the held-out set. Everything
-else stays fp32: the decoder's image head, the encoder's 3-channel stem, the light decoder,
-and the AdaIN's light-code arithmetic that gives the normalisations their scale and shift
-(see ``INT8_OPS``, ``INT8_STAGES``, ``MIN_INT8_INPUTS``).
+else stays fp32: the decoder's image head, a convolution on few channels (the encoder's stem
+unless ``lsyd.optimise`` rewrote it by blocks), the light decoder, and the AdaIN's light-code
+arithmetic that gives the normalisations their scale and shift (see ``INT8_OPS``,
+``INT8_STAGES``, ``MIN_INT8_INPUTS``).
 
 ``--validation`` chooses which convolutions to quantise: each is quantised alone and
 scored on the validation sets, and the cheapest are taken, in that order, as long as
@@ -32,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 import onnx
+from onnx import numpy_helper
 from onnxruntime.quantization import CalibrationDataReader, QuantFormat, QuantType, quantize_static
 from onnxruntime.transformers.float16 import convert_float_to_float16
 
@@ -59,6 +61,42 @@ def check_close(folder: Path, ref: dict[str, np.ndarray], precision: str) -> flo
             f"more than {ERROR_BOUNDS[precision][0]}; make it again from this model with `python -m lsyd.variants`"
         )
     return diff
+
+
+def check_made_from(model: Path, int8: Path) -> list[str]:
+    """Raises unless ``int8`` is an int8 variant of ``model`` as it is now: each stage without
+    int8 convolutions is the model's file byte for byte, each int8 weight is the model's own
+    rounded to its channel's step, and each fp32 convolution beside them has the model's
+    weight. Returns the int8 convolutions' names. Unlike ``check_close`` it needs no input, so
+    it holds on any face."""
+    remake = f"make it again from {model} with `python -m lsyd.variants`"
+    names = []
+    for stage in contract.STAGES:
+        file = contract.stage_file(stage)
+        graph = onnx.load(str(int8 / file)).graph
+        convs = quantised_convs(graph)
+        if not convs:
+            if (int8 / file).read_bytes() != (model / file).read_bytes():
+                raise ValueError(f"{int8}: its {stage} stage is not {model}'s; {remake}")
+            continue
+        fp32 = onnx.load(str(model / file)).graph
+        weights = {t.name: numpy_helper.to_array(t) for t in fp32.initializer}
+        original = {n.name: weights[n.input[1]] for n in fp32.node if n.op_type == "Conv"}
+        stored = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
+        producer = {o: n for n in graph.node for o in n.output}
+        for conv in (n for n in graph.node if n.name in convs):
+            q, scale, zero = (stored[t] for t in producer[conv.input[1]].input)
+            step = scale.reshape(-1, 1, 1, 1)
+            restored = (q.astype(np.float32) - zero.reshape(-1, 1, 1, 1)) * step
+            weight = original.get(conv.name)
+            if weight is None or weight.shape != restored.shape or np.any(np.abs(restored - weight) > 0.5001 * step):
+                raise ValueError(f"{int8}: the int8 weights of {conv.name} are not {model}'s; {remake}")
+        for conv in (n for n in graph.node if n.op_type == "Conv" and n.name not in convs):
+            weight = original.get(conv.name)
+            if weight is None or not np.array_equal(stored[conv.input[1]], weight):
+                raise ValueError(f"{int8}: the weights of {conv.name} are not {model}'s; {remake}")
+        names += convs
+    return names
 
 
 def chain_inputs(model: Path, images: np.ndarray, lights: np.ndarray) -> dict[str, list[dict]]:
@@ -149,7 +187,8 @@ INT8_OPS = ("Conv",)
 # error; it stays fp32 (all three of its 1x1 convolutions int8, a one-off run: 0.209 to 0.144).
 INT8_STAGES = ("encoder", "delight", "decoder")
 # Convolutions with fewer input channels stay fp32: the encoder's stem (3 channels, 7x7)
-# in int8 took the encoder from 0.968 to 1.040 ms instead of 0.793.
+# in int8 took the encoder from 0.968 to 1.040 ms instead of 0.793. Rewritten by blocks
+# (``optimise.convs_by_blocks``: 48 input channels), it is a candidate like the others.
 MIN_INT8_INPUTS = 8
 # Stages whose output is an image; their image head stays fp32 (``image_heads``).
 IMAGE_STAGES = ("decoder", "light_decoder")

@@ -1,18 +1,17 @@
 """The stage rewrites (``lsyd.optimise``): a convolution with few outputs computed by kernel
-rows, and an AdaIN's scale and shift folded into its normalisation, match the original up to
-rounding, on single operations and on the shipped network's stages with real and random
-inputs; other convolutions and plain normalisations are left alone; the shipped model is
-rewritten and keeps its contract; the benchmark times it with and without the rewrites beside
-PyTorch."""
+rows, one with few inputs by blocks, and an AdaIN's scale and shift folded into its
+normalisation, match the original up to rounding, on single operations and on the shipped
+network's stages with real and random inputs; other convolutions and plain normalisations are
+left alone; the shipped model is rewritten and keeps its contract; the benchmark times it with
+and without the rewrites beside PyTorch."""
 
 import numpy as np
 import onnx
 import pytest
 import torch
 from onnx import TensorProto, helper, numpy_helper
-from skimage import data as skdata
 
-from lsyd import contract, data, export, model, optimise, variants
+from lsyd import contract, export, model, optimise, variants
 from lsyd.evaluation import benchmark
 
 
@@ -82,6 +81,38 @@ def test_other_convolutions_are_left_alone(why, model):
     assert optimise.convs_by_rows(model) == [], why
 
 
+@pytest.mark.parametrize("cout,k,size,cin", [(5, 7, 96, 3), (8, 5, 24, 1), (6, 9, 16, 4), (2, 3, 8, 3)])
+def test_convolution_by_blocks_matches_the_original(cout, k, size, cin):
+    original = conv_graph(cout, (k, k), size, cin=cin)
+    rewritten = copy(original)
+    assert optimise.convs_by_blocks(rewritten) == ["conv"]
+    ops = [n.op_type for n in rewritten.graph.node]
+    assert ops == ["SpaceToDepth", "Conv", "DepthToSpace", "Clip"]
+    weight = numpy_helper.to_array(rewritten.graph.initializer[0])
+    assert weight.shape == (16 * cout, 16 * cin, 3, 3)
+    assert rewritten.graph.input == original.graph.input
+    assert rewritten.graph.output == original.graph.output
+    wide = {"x": 4 * np.random.default_rng(1).standard_normal((1, cin, size, size)).astype(np.float32)}
+    diff = optimise.max_difference(original, rewritten, optimise.random_feeds(original) + [wide])
+    assert diff <= optimise.TOLERANCE
+    assert optimise.convs_by_blocks(rewritten) == [], "rewriting twice changes nothing"
+
+
+@pytest.mark.parametrize(
+    "why,model",
+    [
+        ("strided", conv_graph(5, (7, 7), 96, stride=2, cin=3)),
+        ("more inputs than the image's", conv_graph(5, (7, 7), 96, cin=5)),
+        ("a size that blocks do not tile", conv_graph(5, (7, 7), 90, cin=3)),
+        ("a kernel wider than a block each side", conv_graph(5, (11, 11), 96, cin=3)),
+        ("not square", conv_graph(5, (7, 5), 96, cin=3)),
+        ("not 'same' padding", conv_graph(5, (7, 7), 96, same=False, cin=3)),
+    ],
+)
+def test_other_convolutions_are_not_blocked(why, model):
+    assert optimise.convs_by_blocks(model) == [], why
+
+
 def test_original_parameter_undoes_the_layout():
     rng = np.random.default_rng(0)
     w = rng.standard_normal((3, 5, 7, 3)).astype(np.float32)
@@ -92,6 +123,16 @@ def test_original_parameter_undoes_the_layout():
     rows_bias = numpy_helper.to_array(model.graph.initializer[1])
     assert rows_bias.shape == (21,)
     np.testing.assert_array_equal(optimise.original_parameter(rows_bias, b.shape), b)
+    # By blocks: every tap of a 7 x 7 and of a 9 x 9 kernel comes back, and the bias.
+    for k in (7, 9):
+        w = rng.standard_normal((5, 3, k, k)).astype(np.float32)
+        np.testing.assert_array_equal(optimise.original_parameter(optimise.block_weight(w), w.shape), w)
+    model = conv_graph(5, (7, 7), 16, cin=3)
+    b = numpy_helper.to_array(model.graph.initializer[1])
+    optimise.convs_by_blocks(model)
+    blocks_bias = numpy_helper.to_array(model.graph.initializer[1])
+    assert blocks_bias.shape == (80,)
+    np.testing.assert_array_equal(optimise.original_parameter(blocks_bias, b.shape), b)
 
 
 def adain_graph(path, channels: int = 16, size: int = 24) -> onnx.ModelProto:
@@ -157,22 +198,16 @@ def test_shipped_model_is_rewritten_and_keeps_its_contract(shipped_model, tmp_pa
     decoder = onnx.load(shipped_model / "decoder.onnx")
     weight = next(t for t in decoder.graph.initializer if t.name == "net.decoder.out.weight")
     assert list(weight.dims) == [7 * 3, 16, 1, 7], "the decoder's output convolution is not by rows"
-
-
-def real_frame(resolution: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """scikit-image's astronaut portrait, head and shoulders, as the element crops a face; a
-    white screen and the portrait itself shown on the screen as the source and target lights."""
-    portrait = skdata.astronaut()
-    image = data.to_tensor(data.area_resize(portrait[:320, 90:410], resolution)).numpy()[None]
-    white = contract.light_from_frames(np.full((90, 160, 3), 255, np.uint8))[None]
-    return image, white, contract.light_from_frames(portrait)[None]
+    encoder = onnx.load(shipped_model / "encoder.onnx")
+    weight = next(t for t in encoder.graph.initializer if t.name == "net.encoder.stem.weight")
+    assert list(weight.dims) == [16 * 5, 16 * 3, 3, 3], "the encoder's stem is not by blocks"
 
 
 def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_model, tmp_path):
     net = export.network_from_model(shipped_model)
     m = contract.read(shipped_model / "model.json")
     specs = contract.stage_specs(m["resolution"], tuple(m["widths"]))
-    image, source, target = real_frame(m["resolution"])
+    image, source, target = benchmark.portrait_frame(m["resolution"])
     ref = export.reference_run(net, *(torch.from_numpy(x) for x in (image, source, target)))
     export.write_stages(net, specs, tmp_path, ref, rewrite=False)
     real = contract.StageChain(tmp_path).stage_inputs(image, source, target)
@@ -188,13 +223,13 @@ def test_rewritten_stages_match_the_export_on_real_and_random_inputs(shipped_mod
         shipped = onnx.load(shipped_model / contract.stage_file(stage))
         assert optimise.max_difference(rewritten, shipped, feeds) == 0.0, stage
     print(f"max abs difference of the rewritten stages: {diffs}")  # shown with pytest -s
-    assert list(diffs) == ["delight", "decoder"]
+    assert list(diffs) == ["encoder", "delight", "decoder"]
     assert max(diffs.values()) <= optimise.TOLERANCE
 
 
 def test_network_timings_compare_the_rewrite_int8_and_the_peer_in_one_run(shipped_model, tmp_path):
     # The shipped model's int8 variant, calibrated on one frame: the benchmark only times it.
-    image, source, target = real_frame(contract.read(shipped_model / "model.json")["resolution"])
+    image, source, target = benchmark.portrait_frame(contract.read(shipped_model / "model.json")["resolution"])
     variants.to_int8(shipped_model, tmp_path, variants.chain_inputs(shipped_model, image, source))
     timings = benchmark.network_timings(shipped_model, threads=(1,), rounds=2, frames=1, int8=tmp_path)
     for name in ("onnxruntime", "onnxruntime, int8", "onnxruntime, not rewritten", "pytorch"):
