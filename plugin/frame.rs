@@ -691,6 +691,42 @@ const MAX_GAIN: f32 = 4.0;
 /// input does not carry is invented, so it is bounded to about 1 level in 8 bits.
 const INVENTED_LIGHT: f32 = 0.004;
 
+/// A planar image of 3 × `from` × `from` area-resampled to 3 × `to` × `to`: a
+/// smaller view of a crop already made, without a second pass over the frame.
+pub fn resample_square(image: &[f32], from: usize, to: usize) -> Vec<f32> {
+    assert_eq!(
+        image.len(),
+        3 * from * from,
+        "not a 3 x {from} x {from} image"
+    );
+    let weights = AreaWeights::new(from, to);
+    let mut rows = vec![0f32; to * from];
+    let mut out = vec![0f32; 3 * to * to];
+    for (plane, resampled) in image
+        .chunks_exact(from * from)
+        .zip(out.chunks_exact_mut(to * to))
+    {
+        // Vertically, whole rows at a time; then along each of the `to` rows.
+        rows.fill(0.0);
+        for (y, row) in rows.chunks_exact_mut(from).enumerate() {
+            let first = weights.start[y];
+            for (k, &w) in weights.weights[y].iter().enumerate() {
+                let src = &plane[(first + k) * from..][..from];
+                row.iter_mut().zip(src).for_each(|(r, &v)| *r += w * v);
+            }
+        }
+        for (row, dst) in rows.chunks_exact(from).zip(resampled.chunks_exact_mut(to)) {
+            for (x, d) in dst.iter_mut().enumerate() {
+                let first = weights.start[x];
+                *d = (weights.weights[x].iter().enumerate())
+                    .map(|(k, &w)| w * row[first + k])
+                    .sum();
+            }
+        }
+    }
+    out
+}
+
 /// Rec. 709 luma of pixel `i` of a planar image of `n` pixels a channel.
 fn luma(img: &[f32], n: usize, i: usize) -> f32 {
     0.2126 * img[i] + 0.7152 * img[n + i] + 0.0722 * img[2 * n + i]

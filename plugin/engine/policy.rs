@@ -27,7 +27,7 @@ use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
 use crate::engine::contract::PRESENCE_SIZE;
-use crate::frame::{Crop, Frame, LightingChange, mean_luma, sample_crop};
+use crate::frame::{Crop, Frame, LightingChange, mean_luma, resample_square, sample_crop};
 use crate::light::Light;
 
 /// Where this frame's source light comes from.
@@ -424,8 +424,11 @@ impl FramePolicy {
         }
         let mut presence = None;
         if self.skips.skip_absent && self.relighter.has_presence() {
+            // From the network's crop, not the frame: one pass over the face
+            // region feeds both. (The shipped classifier's decisions are the
+            // same either way: README, "Skipping what a scene does not need".)
             let small = timed(&mut self.counts.crop_seconds, || {
-                sample_crop(frame, crop, PRESENCE_SIZE)
+                resample_square(&image, res, PRESENCE_SIZE)
             });
             presence = self.relighter.presence(&small)?;
             if presence.is_some_and(|p| p < self.skips.presence_threshold) {

@@ -67,6 +67,31 @@ fn area_resample_of_a_uniform_crop_is_uniform() {
 }
 
 #[test]
+fn a_crop_resampled_smaller_is_the_smaller_crop() {
+    let mut noise = Noise(0x5eed);
+    let buffers = random_frame(PixelFormat::Rgb, 200, 150, &mut noise);
+    let crop = Crop {
+        x: 30,
+        y: 11,
+        size: 128,
+    };
+    let full = sample_crop(&buffers.frame(), crop, 128);
+    assert_eq!(resample_square(&full, 128, 128), full);
+    // Whole pixels of the crop a resampled pixel: the same sums as the frame's.
+    let direct = sample_crop(&buffers.frame(), crop, 64);
+    let resampled = resample_square(&full, 128, 64);
+    let worst = (direct.iter().zip(&resampled)).fold(0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(worst < 1e-5, "largest difference {worst:e}");
+    // Between sizes that are not multiples, each plane keeps its mean.
+    let from_96 = sample_crop(&buffers.frame(), crop, 96);
+    let to_64 = resample_square(&from_96, 96, 64);
+    for c in 0..3 {
+        let mean = |img: &[f32], n: usize| img[c * n..(c + 1) * n].iter().sum::<f32>() / n as f32;
+        assert!((mean(&from_96, 96 * 96) - mean(&to_64, 64 * 64)).abs() < 1e-4);
+    }
+}
+
+#[test]
 fn identity_change_keeps_the_frame() {
     let mut data = rgb_frame(64, 64, |x, y| {
         [(x * 4) as u8, (y * 4) as u8, ((x + y) * 2) as u8]

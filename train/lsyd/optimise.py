@@ -50,6 +50,7 @@ from __future__ import annotations
 
 import argparse
 import itertools
+import math
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +71,11 @@ MAX_OUTPUT_CHANNELS = 4
 # 0.966 before, 0.861 by blocks.
 MAX_BLOCK_INPUTS = 4
 BLOCK = 4
+# Only where it was measured: a wide kernel to few outputs. Of the 144 taps an output of a 3x3
+# convolution over blocks reads, a 7x7 kernel fills 49 and a 3x3 one 9; the blocked weight
+# grows with the outputs as 16 O x 48 x 9. (Blocked twice is impossible: 16 C inputs.)
+MIN_BLOCK_KERNEL = 5
+MAX_BLOCK_OUTPUTS = 8
 # Max abs difference allowed between a rewritten stage and the original (outputs are O(1)).
 TOLERANCE = 1e-5
 
@@ -91,10 +97,13 @@ def original_parameter(value: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
     if value.ndim == 4:
         # By blocks: output phase (0, 0) holds every tap of the kernel once (``block_weight``).
         _, cin, k, _ = shape
-        taps = [divmod(i - k // 2, BLOCK) for i in range(k)]  # (block from the centre, phase)
+        block = math.isqrt(value.shape[0] // cout)
+        if value.shape != (block * block * cout, block * block * cin, 3, 3):
+            raise ValueError(f"a weight of shape {value.shape} is not {shape} by rows or by blocks")
+        taps = [divmod(i - k // 2, block) for i in range(k)]  # (block from the centre, phase)
         w = np.empty(shape, value.dtype)
         for (ky, (dy, py)), (kx, (dx, px)) in itertools.product(enumerate(taps), repeat=2):
-            c = (py * BLOCK + px) * cin
+            c = (py * block + px) * cin
             w[:, :, ky, kx] = value[:cout, c : c + cin, dy + 1, dx + 1]
         return w
     if value.size == BLOCK * BLOCK * cout:
@@ -117,20 +126,20 @@ def _shapes(model: onnx.ModelProto) -> dict[str, list[int | None]]:
     }
 
 
-def _rewritable(node: onnx.NodeProto, inits: dict, shapes: dict) -> bool:
-    """A stride-1, 'same'-padded convolution with constant parameters, at most
-    ``MAX_OUTPUT_CHANNELS`` outputs, a kernel of more than one row and a known height."""
+def _same_conv(node: onnx.NodeProto, inits: dict, shapes: dict) -> tuple[list[int], list[int]] | None:
+    """For a plain convolution (constant parameters, one group, stride 1, no dilation) with an
+    odd kernel, 'same' padding and an input of known rank 4: its weight's dims and its input's
+    shape (None where a size is not known). None for any other node."""
     if node.op_type != "Conv" or node.input[1] not in inits:
-        return False
+        return None
     if len(node.input) > 2 and node.input[2] not in inits:
-        return False
-    cout, _, kh, kw = inits[node.input[1]].dims
+        return None
+    dims = list(inits[node.input[1]].dims)
+    kh, kw = dims[2:]
     a = _attrs(node)
     shape = shapes.get(node.input[0])
-    return (
-        cout <= MAX_OUTPUT_CHANNELS
-        and kh > 1
-        and kh % 2 == 1
+    plain = (
+        kh % 2 == 1
         and kw % 2 == 1
         and a.get("group", 1) == 1
         and a.get("auto_pad", b"NOTSET") == b"NOTSET"
@@ -139,8 +148,34 @@ def _rewritable(node: onnx.NodeProto, inits: dict, shapes: dict) -> bool:
         and list(a.get("pads", [0] * 4)) == [kh // 2, kw // 2] * 2
         and shape is not None
         and len(shape) == 4
-        and isinstance(shape[2], int)
     )
+    return (dims, shape) if plain else None
+
+
+def _splice(g: onnx.GraphProto, at: slice, nodes: list[onnx.NodeProto]) -> None:
+    """Replaces the graph's nodes ``at`` with ``nodes``."""
+    all_nodes = list(g.node)
+    all_nodes[at] = nodes
+    del g.node[:]
+    g.node.extend(all_nodes)
+
+
+def _set_kernel(conv: onnx.NodeProto, kernel: list[int], pads: list[int]) -> None:
+    for a in conv.attribute:
+        if a.name == "kernel_shape":
+            a.CopyFrom(helper.make_attribute("kernel_shape", kernel))
+        elif a.name == "pads":
+            a.CopyFrom(helper.make_attribute("pads", pads))
+
+
+def _rewritable(node: onnx.NodeProto, inits: dict, shapes: dict) -> bool:
+    """A plain 'same' convolution (``_same_conv``) with at most ``MAX_OUTPUT_CHANNELS`` outputs,
+    a kernel of more than one row and a known height."""
+    found = _same_conv(node, inits, shapes)
+    if found is None:
+        return False
+    (cout, _, kh, _), shape = found
+    return cout <= MAX_OUTPUT_CHANNELS and kh > 1 and isinstance(shape[2], int)
 
 
 def convs_by_rows(model: onnx.ModelProto) -> list[str]:
@@ -165,12 +200,7 @@ def convs_by_rows(model: onnx.ModelProto) -> list[str]:
             rows_bias = np.zeros((kh, cout), dtype=bias.dtype)
             rows_bias[kh // 2] = bias
             b.CopyFrom(numpy_helper.from_array(rows_bias.ravel(), b.name))
-        for a in conv.attribute:
-            if a.name == "kernel_shape":
-                a.CopyFrom(helper.make_attribute("kernel_shape", [1, kw]))
-            elif a.name == "pads":
-                a.CopyFrom(helper.make_attribute("pads", [kh // 2, kw // 2] * 2))
-
+        _set_kernel(conv, [1, kw], [kh // 2, kw // 2] * 2)
         y = conv.output[0]
         conv.output[0] = f"{y}/rows"
         axes = f"{conv.name}/rows/axes"
@@ -188,54 +218,42 @@ def convs_by_rows(model: onnx.ModelProto) -> list[str]:
                 helper.make_node("Slice", [conv.output[0], starts, ends, axes], [f"{y}/row{j}"], f"{conv.name}/row{j}")
             )
         nodes.append(helper.make_node("Sum", [n.output[0] for n in nodes], [y], f"{conv.name}/sum"))
-        all_nodes = list(g.node)
-        all_nodes[at + 1 : at + 1] = nodes
-        del g.node[:]
-        g.node.extend(all_nodes)
+        _splice(g, slice(at + 1, at + 1), nodes)
         rewritten.append(conv.name)
     onnx.checker.check_model(model, full_check=True)
     return rewritten
 
 
-def block_weight(w: np.ndarray, block: int = BLOCK) -> np.ndarray:
-    """A k x k convolution's weight [O, C, k, k] (odd k, k // 2 <= block) as the 3 x 3
-    convolution's [block² O, block² C, 3, 3] over SpaceToDepth(block) of its input, whose output
-    DepthToSpace(block) (DCR) puts back: output phase (ay, ax) of output o is channel
-    (ay * block + ax) * O + o, input phase (py, px) of input c is channel (py * block + px) * C + c,
-    and tap (dy, dx) of the 3 x 3 kernel is the original's (block dy + py - ay + k // 2, same in x)."""
+def block_weight(w: np.ndarray) -> np.ndarray:
+    """A k x k convolution's weight [O, C, k, k] (odd k, k // 2 <= BLOCK) as the 3 x 3
+    convolution's [B² O, B² C, 3, 3] over SpaceToDepth(B) of its input (B = ``BLOCK``), whose
+    output DepthToSpace(B) (DCR) puts back: output phase (ay, ax) of output o is channel
+    (ay * B + ax) * O + o, input phase (py, px) of input c is channel (py * B + px) * C + c, and
+    tap (dy, dx) of the 3 x 3 kernel is the original's (B (dy - 1) + py - ay + k // 2, same in x)."""
     cout, cin, k, _ = w.shape
-    out = np.zeros((block * block * cout, block * block * cin, 3, 3), w.dtype)
-    for ay, ax, py, px, dy, dx in np.ndindex(block, block, block, block, 3, 3):
-        ky, kx = block * (dy - 1) + py - ay + k // 2, block * (dx - 1) + px - ax + k // 2
+    b = BLOCK
+    out = np.zeros((b * b * cout, b * b * cin, 3, 3), w.dtype)
+    for ay, ax, py, px, dy, dx in np.ndindex(b, b, b, b, 3, 3):
+        ky, kx = b * (dy - 1) + py - ay + k // 2, b * (dx - 1) + px - ax + k // 2
         if 0 <= ky < k and 0 <= kx < k:
-            o, c = (ay * block + ax) * cout, (py * block + px) * cin
+            o, c = (ay * b + ax) * cout, (py * b + px) * cin
             out[o : o + cout, c : c + cin, dy, dx] = w[:, :, ky, kx]
     return out
 
 
 def _blockable(node: onnx.NodeProto, inits: dict, shapes: dict) -> bool:
-    """A stride-1, 'same'-padded square convolution with constant parameters, at most
-    ``MAX_BLOCK_INPUTS`` inputs, an odd kernel of at most 2 ``BLOCK`` + 1 and a known size that
-    whole blocks tile."""
-    if node.op_type != "Conv" or node.input[1] not in inits:
+    """A plain 'same' convolution (``_same_conv``) with at most ``MAX_BLOCK_INPUTS`` inputs and
+    ``MAX_BLOCK_OUTPUTS`` outputs, a square kernel from ``MIN_BLOCK_KERNEL`` to 2 ``BLOCK`` + 1
+    wide, and a known size that whole blocks tile."""
+    found = _same_conv(node, inits, shapes)
+    if found is None:
         return False
-    if len(node.input) > 2 and node.input[2] not in inits:
-        return False
-    _, cin, kh, kw = inits[node.input[1]].dims
-    a = _attrs(node)
-    shape = shapes.get(node.input[0])
+    (cout, cin, kh, kw), shape = found
     return (
         cin <= MAX_BLOCK_INPUTS
+        and cout <= MAX_BLOCK_OUTPUTS
         and kh == kw
-        and kh % 2 == 1
-        and 1 < kh <= 2 * BLOCK + 1
-        and a.get("group", 1) == 1
-        and a.get("auto_pad", b"NOTSET") == b"NOTSET"
-        and list(a.get("strides", [1, 1])) == [1, 1]
-        and list(a.get("dilations", [1, 1])) == [1, 1]
-        and list(a.get("pads", [0] * 4)) == [kh // 2] * 4
-        and shape is not None
-        and len(shape) == 4
+        and MIN_BLOCK_KERNEL <= kh <= 2 * BLOCK + 1
         and all(isinstance(d, int) and d % BLOCK == 0 for d in shape[2:])
     )
 
@@ -256,21 +274,15 @@ def convs_by_blocks(model: onnx.ModelProto) -> list[str]:
         if len(conv.input) > 2:
             b = inits[conv.input[2]]
             b.CopyFrom(numpy_helper.from_array(np.tile(numpy_helper.to_array(b), BLOCK * BLOCK), b.name))
-        for a in conv.attribute:
-            if a.name == "kernel_shape":
-                a.CopyFrom(helper.make_attribute("kernel_shape", [3, 3]))
-            elif a.name == "pads":
-                a.CopyFrom(helper.make_attribute("pads", [1, 1, 1, 1]))
+        _set_kernel(conv, [3, 3], [1, 1, 1, 1])
         x, y = conv.input[0], conv.output[0]
-        conv.input[0], conv.output[0] = f"{x}/blocks", f"{y}/blocks"
+        # Named after the convolution: two of them may read the same tensor.
+        conv.input[0], conv.output[0] = f"{name}/blocks_in", f"{name}/blocks_out"
         before = helper.make_node("SpaceToDepth", [x], [conv.input[0]], f"{name}/to_blocks", blocksize=BLOCK)
         after = helper.make_node(
             "DepthToSpace", [conv.output[0]], [y], f"{name}/from_blocks", blocksize=BLOCK, mode="DCR"
         )
-        all_nodes = list(g.node)
-        all_nodes[at : at + 1] = [before, conv, after]
-        del g.node[:]
-        g.node.extend(all_nodes)
+        _splice(g, slice(at, at + 1), [before, conv, after])
         rewritten.append(name)
     onnx.checker.check_model(model, full_check=True)
     return rewritten
@@ -443,9 +455,9 @@ def optimise_file(path: Path) -> tuple[list[str], float]:
 
 
 def optimise_folder(folder: Path) -> dict[str, tuple[list[str], float]]:
-    """Rewrites a model folder's network stages in place (idempotent: a rewritten
-    convolution's kernel has one row and a folded normalisation's scale is no longer constant,
-    so neither qualifies again)."""
+    """Rewrites a model folder's network stages in place (idempotent: a convolution by rows has
+    a kernel of one row, one by blocks 16 times its inputs, and a folded normalisation's scale
+    is no longer constant, so none qualifies again)."""
     return {stage: optimise_file(folder / contract.stage_file(stage)) for stage in contract.STAGES}
 
 

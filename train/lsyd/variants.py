@@ -64,12 +64,15 @@ def check_close(folder: Path, ref: dict[str, np.ndarray], precision: str) -> flo
 
 
 def check_made_from(model: Path, int8: Path) -> list[str]:
-    """Raises unless ``int8`` is an int8 variant of ``model`` as it is now: each stage without
-    int8 convolutions is the model's file byte for byte, each int8 weight is the model's own
-    rounded to its channel's step, and each fp32 convolution beside them has the model's
-    weight. Returns the int8 convolutions' names. Unlike ``check_close`` it needs no input, so
-    it holds on any face."""
+    """Raises unless ``int8`` is an int8 variant of ``model`` as it is now: its manifest says int8
+    and some convolution is int8; each stage without one is the model's file byte for byte; in
+    the others each int8 weight is the model's own rounded to its channel's step, and every
+    float parameter both graphs hold by name (the fp32 convolutions', the normalisations', the
+    light code's) is the model's. Returns the int8 convolutions' names. Unlike ``check_close`` it
+    needs no input, so it holds on any face."""
     remake = f"make it again from {model} with `python -m lsyd.variants`"
+    if contract.read(int8 / "model.json").get("precision") != "int8":
+        raise ValueError(f"{int8}: its manifest does not say int8; {remake}")
     names = []
     for stage in contract.STAGES:
         file = contract.stage_file(stage)
@@ -80,22 +83,26 @@ def check_made_from(model: Path, int8: Path) -> list[str]:
                 raise ValueError(f"{int8}: its {stage} stage is not {model}'s; {remake}")
             continue
         fp32 = onnx.load(str(model / file)).graph
-        weights = {t.name: numpy_helper.to_array(t) for t in fp32.initializer}
-        original = {n.name: weights[n.input[1]] for n in fp32.node if n.op_type == "Conv"}
+        params = {t.name: numpy_helper.to_array(t) for t in fp32.initializer}
+        weights = {n.name: params.get(n.input[1]) for n in fp32.node if n.op_type == "Conv"}
         stored = {t.name: numpy_helper.to_array(t) for t in graph.initializer}
         producer = {o: n for n in graph.node for o in n.output}
         for conv in (n for n in graph.node if n.name in convs):
-            q, scale, zero = (stored[t] for t in producer[conv.input[1]].input)
+            parts = [stored.get(t) for t in producer[conv.input[1]].input]
+            weight = weights.get(conv.name)
+            if len(parts) != 3 or any(part is None for part in parts) or weight is None:
+                raise ValueError(f"{int8}: the int8 weights of {conv.name} are not {model}'s; {remake}")
+            q, scale, zero = parts
             step = scale.reshape(-1, 1, 1, 1)
             restored = (q.astype(np.float32) - zero.reshape(-1, 1, 1, 1)) * step
-            weight = original.get(conv.name)
-            if weight is None or weight.shape != restored.shape or np.any(np.abs(restored - weight) > 0.5001 * step):
+            if weight.shape != restored.shape or np.any(np.abs(restored - weight) > 0.5001 * step):
                 raise ValueError(f"{int8}: the int8 weights of {conv.name} are not {model}'s; {remake}")
-        for conv in (n for n in graph.node if n.op_type == "Conv" and n.name not in convs):
-            weight = original.get(conv.name)
-            if weight is None or not np.array_equal(stored[conv.input[1]], weight):
-                raise ValueError(f"{int8}: the weights of {conv.name} are not {model}'s; {remake}")
+        for name, value in stored.items():
+            if value.dtype.kind == "f" and name in params and not np.array_equal(value, params[name]):
+                raise ValueError(f"{int8}: {name} of its {stage} stage is not {model}'s; {remake}")
         names += convs
+    if not names:
+        raise ValueError(f"{int8}: no convolution is int8; {remake}")
     return names
 
 
@@ -181,7 +188,7 @@ def to_fp16(model: Path, out: Path) -> None:
 # convolutions only 7.814 / 8.312 at 0.450 / 1.593 ms, where fp32 takes 0.817 / 2.03.
 INT8_OPS = ("Conv",)
 # Quantised unless told otherwise: the stages whose int8 convolutions were measured faster
-# (CPU ms a run, 1 thread, default model): the encoder 0.968 to 0.793 (its stem aside, below),
+# (CPU ms a run, 1 thread, default model): the encoder 0.968 to 0.793 (its stem fp32, below),
 # the delight 0.817 to 0.450, the decoder 2.03 to 1.593. The light decoder runs only when the
 # source light is unknown, and the validation cost, relit with the source known, cannot see its
 # error; it stays fp32 (all three of its 1x1 convolutions int8, a one-off run: 0.209 to 0.144).

@@ -15,16 +15,25 @@ from lsyd import contract, export, model, optimise, variants
 from lsyd.evaluation import benchmark
 
 
-def conv_graph(cout: int, kernel: tuple[int, int], size: int, stride: int = 1, same: bool = True, cin: int = 16):
+def conv_graph(
+    cout: int, kernel: tuple[int, int], size: int, stride: int = 1, same: bool = True, cin: int = 16, group: int = 1
+):
     """x [1,cin,size,size] -> Conv(kernel, bias) -> Clip(0, 1) -> y, with random weights."""
     kh, kw = kernel
     rng = np.random.default_rng(kh * 100 + kw * 10 + cout)
     pads = [kh // 2, kw // 2] * 2 if same else [0] * 4
-    w = (rng.standard_normal((cout, cin, kh, kw)) / np.sqrt(cin * kh * kw)).astype(np.float32)
+    w = (rng.standard_normal((cout, cin // group, kh, kw)) / np.sqrt(cin * kh * kw)).astype(np.float32)
     b = rng.standard_normal(cout).astype(np.float32)
     nodes = [
         helper.make_node(
-            "Conv", ["x", "w", "b"], ["h"], "conv", kernel_shape=[kh, kw], pads=pads, strides=[stride] * 2
+            "Conv",
+            ["x", "w", "b"],
+            ["h"],
+            "conv",
+            kernel_shape=[kh, kw],
+            pads=pads,
+            strides=[stride] * 2,
+            group=group,
         ),
         helper.make_node("Clip", ["h", "lo", "hi"], ["y"], "clip"),
     ]
@@ -81,7 +90,7 @@ def test_other_convolutions_are_left_alone(why, model):
     assert optimise.convs_by_rows(model) == [], why
 
 
-@pytest.mark.parametrize("cout,k,size,cin", [(5, 7, 96, 3), (8, 5, 24, 1), (6, 9, 16, 4), (2, 3, 8, 3)])
+@pytest.mark.parametrize("cout,k,size,cin", [(5, 7, 96, 3), (8, 5, 24, 1), (6, 9, 16, 4), (4, 7, 16, 2)])
 def test_convolution_by_blocks_matches_the_original(cout, k, size, cin):
     original = conv_graph(cout, (k, k), size, cin=cin)
     rewritten = copy(original)
@@ -105,12 +114,38 @@ def test_convolution_by_blocks_matches_the_original(cout, k, size, cin):
         ("more inputs than the image's", conv_graph(5, (7, 7), 96, cin=5)),
         ("a size that blocks do not tile", conv_graph(5, (7, 7), 90, cin=3)),
         ("a kernel wider than a block each side", conv_graph(5, (11, 11), 96, cin=3)),
+        ("a 3x3 kernel, 9 of the 144 taps", conv_graph(5, (3, 3), 96, cin=3)),
+        ("more outputs than measured", conv_graph(16, (7, 7), 96, cin=3)),
+        ("grouped", conv_graph(4, (7, 7), 96, cin=4, group=2)),
         ("not square", conv_graph(5, (7, 5), 96, cin=3)),
         ("not 'same' padding", conv_graph(5, (7, 7), 96, same=False, cin=3)),
     ],
 )
 def test_other_convolutions_are_not_blocked(why, model):
     assert optimise.convs_by_blocks(model) == [], why
+
+
+def test_two_convolutions_of_one_input_are_blocked_apart():
+    # Each rewrite's tensors are named after its convolution, not the input they share.
+    model = conv_graph(5, (7, 7), 32, cin=3)
+    second = onnx.NodeProto()
+    second.CopyFrom(model.graph.node[0])
+    second.name, second.output[0] = "conv2", "h2"
+    second.input[1], second.input[2] = "w2", "b2"
+    for name, init in zip(("w2", "b2"), model.graph.initializer[:2]):
+        model.graph.initializer.append(numpy_helper.from_array(1.5 * numpy_helper.to_array(init), name))
+    model.graph.node.insert(1, second)
+    model.graph.node.insert(2, helper.make_node("Add", ["h", "h2"], ["sum"], "add"))
+    model.graph.node[3].input[0] = "sum"
+    original = copy(model)
+    assert optimise.convs_by_blocks(model) == ["conv", "conv2"]
+    assert optimise.max_difference(original, model, optimise.random_feeds(original)) <= optimise.TOLERANCE
+
+
+def test_a_small_convolution_on_few_channels_is_rewritten_once_by_rows():
+    model = conv_graph(3, (7, 7), 32, cin=3)
+    assert optimise.rewrite(model) == ["conv"]
+    assert "SpaceToDepth" not in [n.op_type for n in model.graph.node]
 
 
 def test_original_parameter_undoes_the_layout():
@@ -133,6 +168,8 @@ def test_original_parameter_undoes_the_layout():
     blocks_bias = numpy_helper.to_array(model.graph.initializer[1])
     assert blocks_bias.shape == (80,)
     np.testing.assert_array_equal(optimise.original_parameter(blocks_bias, b.shape), b)
+    with pytest.raises(ValueError, match="not .* by rows or by blocks"):
+        optimise.original_parameter(np.zeros((80, 40, 3, 3), np.float32), (5, 3, 7, 7))
 
 
 def adain_graph(path, channels: int = 16, size: int = 24) -> onnx.ModelProto:

@@ -1,10 +1,13 @@
 """Lower-precision variants of the shipped model: finite on any input, and within the
 error bounds ``variants.ERROR_BOUNDS`` states against fp32."""
 
+import shutil
+
 import numpy as np
 import onnx
 import pytest
 import torch
+from onnx import numpy_helper
 
 from lsyd import contract, data, export, variants
 
@@ -98,6 +101,8 @@ def test_int8_quantises_convolutions_only_and_keeps_the_contract_and_the_image_h
     assert sorted(variants.check_made_from(shipped_model, tmp_path)) == sorted(variants.int8_candidates(shipped_model))
     with pytest.raises(ValueError, match="is not .*starter's"):
         variants.check_made_from(shipped_model.parent / "starter", tmp_path)
+    with pytest.raises(ValueError, match="does not say int8"):
+        variants.check_made_from(shipped_model, shipped_model)
     # The tests' check against the fp32 network, on a held-out face; refused when far off.
     held = data.Heldout.load(sim_data / "heldout")
     image = data.to_tensor(data.area_resize(held.images[:1, 0], res))
@@ -107,6 +112,40 @@ def test_int8_quantises_convolutions_only_and_keeps_the_contract_and_the_image_h
     ref["relit"] = 1.0 - ref["relit"]
     with pytest.raises(ValueError, match="int8 variant relights"):
         variants.check_close(tmp_path, ref, "int8")
+
+
+def edit_initializer(path, name: str, change) -> None:
+    model = onnx.load(path)
+    init = next(t for t in model.graph.initializer if t.name == name)
+    init.CopyFrom(numpy_helper.from_array(change(numpy_helper.to_array(init).copy()), name))
+    onnx.save(model, path)
+
+
+def test_a_variant_is_refused_where_it_is_not_the_model(shipped_model, tmp_path):
+    # Each of check_made_from's refusals, on a copy of the shipped variant changed in one place.
+    int8 = shipped_model.parent / "default-int8"
+    decoder = contract.stage_file("decoder")
+
+    def two_steps_off(q):
+        q.flat[0] += 2 if q.flat[0] < 100 else -2
+        return q
+
+    def nudged(w):
+        w.flat[0] += 0.01
+        return w
+
+    for name, change, why in [
+        ("/decoder/convs.0/Conv", two_steps_off, "int8 weights of /decoder/convs.0/Conv are not"),
+        ("net.decoder.out.weight", nudged, "net.decoder.out.weight of its decoder stage is not"),
+    ]:
+        copy = tmp_path / name.replace("/", "_")
+        shutil.copytree(int8, copy)
+        graph = onnx.load(copy / decoder).graph
+        producer = {o: n for n in graph.node for o in n.output}
+        conv = next((n for n in graph.node if n.name == name), None)
+        edit_initializer(copy / decoder, producer[conv.input[1]].input[0] if conv else name, change)
+        with pytest.raises(ValueError, match=why):
+            variants.check_made_from(shipped_model, copy)
 
 
 def test_the_cheapest_convolutions_are_quantised_while_the_cost_stays_within_the_bound():
