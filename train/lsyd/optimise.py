@@ -51,6 +51,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import math
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -152,6 +153,18 @@ def _same_conv(node: onnx.NodeProto, inits: dict, shapes: dict) -> tuple[list[in
     return (dims, shape) if plain else None
 
 
+def _each_node(model: onnx.ModelProto, wanted) -> Iterator[tuple[int, onnx.NodeProto, dict, dict]]:
+    """Each node that ``wanted(node, initializers, shapes)`` picks, with its index when it is
+    reached, the graph's initializers by name and the tensors' shapes before any rewrite. Found
+    by name: rewriting a node rebuilds the node list and replaces the node objects."""
+    g = model.graph
+    inits = {t.name: t for t in g.initializer}
+    shapes = _shapes(model)
+    for name in [n.name for n in g.node if wanted(n, inits, shapes)]:
+        at, node = next((i, n) for i, n in enumerate(g.node) if n.name == name)
+        yield at, node, inits, shapes
+
+
 def _splice(g: onnx.GraphProto, at: slice, nodes: list[onnx.NodeProto]) -> None:
     """Replaces the graph's nodes ``at`` with ``nodes``."""
     all_nodes = list(g.node)
@@ -183,12 +196,8 @@ def convs_by_rows(model: onnx.ModelProto) -> list[str]:
     kernel rows and a sum of shifted rows (see the module's notes). Returns the rewritten
     nodes' names."""
     g = model.graph
-    inits = {t.name: t for t in g.initializer}
-    shapes = _shapes(model)
     rewritten = []
-    # By name: rebuilding the node list below replaces the node objects.
-    for name in [n.name for n in g.node if _rewritable(n, inits, shapes)]:
-        at, conv = next((i, n) for i, n in enumerate(g.node) if n.name == name)
+    for at, conv, inits, shapes in _each_node(model, _rewritable):
         w = inits[conv.input[1]]
         cout, _, kh, kw = w.dims
         height = shapes[conv.input[0]][2]
@@ -264,11 +273,9 @@ def convs_by_blocks(model: onnx.ModelProto) -> list[str]:
     summed in another order, so exact up to rounding. The convolution keeps its name and its
     parameters' names. Returns the rewritten nodes' names."""
     g = model.graph
-    inits = {t.name: t for t in g.initializer}
-    shapes = _shapes(model)
     rewritten = []
-    for name in [n.name for n in g.node if _blockable(n, inits, shapes)]:
-        at, conv = next((i, n) for i, n in enumerate(g.node) if n.name == name)
+    for at, conv, inits, _ in _each_node(model, _blockable):
+        name = conv.name
         w = inits[conv.input[1]]
         w.CopyFrom(numpy_helper.from_array(block_weight(numpy_helper.to_array(w)), w.name))
         if len(conv.input) > 2:
