@@ -129,18 +129,33 @@ fn same_rate_picks_the_frame_shown_at_the_same_time() {
     let run = run_non_live(30, 30, 2, 0, 0, u64::MAX);
     run.check(0, "30/30 fps");
     assert_eq!(stat(&run.element, "known-source"), run.faces.len() as u64);
+    // Every light was computed on the monitor stream's thread as its frame came,
+    // so no face frame waited for one.
+    assert_eq!(
+        stat(&run.element, "monitor-arrival-decoded"),
+        stat(&run.element, "monitor-frames")
+    );
+    assert_eq!(stat(&run.element, "monitor-decoded"), 0);
 }
 
 #[test]
 fn faster_and_slower_monitor_streams() {
     let fast = run_non_live(30, 60, 2, 0, 0, u64::MAX);
     fast.check(0, "30 fps face, 60 fps monitor");
-    // Every monitor frame is read, but only those a face frame uses are decoded.
+    // Every monitor frame is read. After the first few face frames, which find the
+    // monitor stream twice as fast, only those a face frame uses are decoded.
     let last_face = *fast.faces.last().unwrap();
     let shown = fast.monitor.iter().filter(|&&m| m <= last_face).count() as u64;
     assert_eq!(stat(&fast.element, "monitor-frames"), shown);
-    assert!(stat(&fast.element, "monitor-decoded") <= fast.faces.len() as u64);
-    run_non_live(30, 10, 2, 0, 0, u64::MAX).check(0, "30 fps face, 10 fps monitor");
+    let on_arrival = stat(&fast.element, "monitor-arrival-decoded");
+    assert!(on_arrival <= 10, "{on_arrival} lights computed on arrival");
+    assert!(
+        stat(&fast.element, "monitor-decoded") + on_arrival <= fast.faces.len() as u64 + 5,
+        "lights of frames no face frame used were computed"
+    );
+    let slow = run_non_live(30, 10, 2, 0, 0, u64::MAX);
+    slow.check(0, "30 fps face, 10 fps monitor");
+    assert_eq!(stat(&slow.element, "monitor-decoded"), 0);
 }
 
 #[test]

@@ -198,13 +198,7 @@ impl LsydRelight {
             ),
             None => Decision::Fallback(Fallback::NoMonitorPad),
         };
-        self.count(|st| {
-            st.monitor_frames += reading.frames;
-            if let Some(t) = reading.decoded {
-                st.monitor_decoded += 1;
-                st.monitor_light_seconds += t.as_secs_f64();
-            }
-        });
+        self.count(|st| st.monitor.add(&reading));
         let (fallback, result) = match decision {
             Decision::Wait => {
                 gst::trace!(
@@ -295,13 +289,7 @@ impl LsydRelight {
             settings.monitor_timeout,
             &mut reading,
         );
-        self.count(|st| {
-            st.target_stream_frames += reading.frames;
-            if let Some(t) = reading.decoded {
-                st.target_stream_decoded += 1;
-                st.target_stream_light_seconds += t.as_secs_f64();
-            }
-        });
+        self.count(|st| st.target_stream.add(&reading));
         let (light, fallback) = match decision {
             Decision::Wait => return None,
             Decision::Known(light, _) => (Some(light), None),
@@ -1135,8 +1123,8 @@ impl AggregatorImpl for LsydRelight {
         lock(&self.target).stop();
         self.qos.reset();
         *lock(&self.state) = None;
-        *lock(&self.monitor) = MonitorTrack::default();
-        *lock(&self.target_track) = MonitorTrack::default();
+        lock(&self.monitor).stop();
+        lock(&self.target_track).stop();
         self.side.clear();
         Ok(())
     }
@@ -1157,9 +1145,9 @@ impl AggregatorImpl for LsydRelight {
         _caps: Option<&gst::Caps>,
     ) -> Option<gst_base::AggregatorPad> {
         let name = templ.name_template();
-        let slot = match name {
-            "monitor_sink" => &self.monitor_pad,
-            "target_sink" => &self.target_pad,
+        let (slot, track) = match name {
+            "monitor_sink" => (&self.monitor_pad, &self.monitor),
+            "target_sink" => (&self.target_pad, &self.target_track),
             _ => return None,
         };
         let mut held = lock(slot);
@@ -1170,6 +1158,7 @@ impl AggregatorImpl for LsydRelight {
         let pad = gst::PadBuilder::<gst_base::AggregatorPad>::from_template(templ)
             .name(name)
             .build();
+        lock(track).attach(&pad);
         *held = Some(pad.clone());
         gst::debug!(CAT, imp = self, "{name} requested");
         Some(pad)

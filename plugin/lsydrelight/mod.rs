@@ -8,11 +8,14 @@
 //! - `sink`: the face video (I420, NV12, Y444, RGBA, BGRA, RGBx, BGRx, RGB, BGR; any size and rate).
 //! - `monitor_sink` (request): what the monitor showed, e.g. a screen capture, any size and rate.
 //!   Each face frame uses the monitor frame shown at its running time minus `monitor-offset`.
+//!   A frame's light is computed on the monitor stream's own thread as it arrives (while that
+//!   stream runs no faster than the face's; faster, only for the frames used, on the
+//!   element's thread).
 //!   Without this pad, or while the monitor stream is stalled or over, the source light is
 //!   predicted from the face (unknown-source mode).
 //! - `target_sink` (request): a video whose frames are the target light (monitor content,
 //!   e.g. the virtual background the person appears in front of), aligned by running time
-//!   as `monitor_sink` is. Its light is computed once per frame it shows; while it has not
+//!   as `monitor_sink` is, and its lights computed alike; while it has not
 //!   started the target properties hold, and when it stalls or ends its last frame stays
 //!   the target (one warning says so).
 //! - `src`: the relit video, in the face video's caps. A frame relit with the monitor's

@@ -7,14 +7,36 @@
 //! decoded. Without usable monitor content (no pad, not yet started, stalled,
 //! ended, unreadable) the face frame is relit with the predicted light, and a
 //! warning says so once, when that starts.
+//!
+//! A monitor frame's light is computed on the monitor stream's own thread as the
+//! frame arrives ([`ArrivalLights`]), so that the face frame does not wait for it,
+//! while the monitor stream runs no faster than the face stream. Faster, most of
+//! its frames are replaced before any face frame uses them, and only the ones
+//! used get their light, on the element's thread.
 
+use std::collections::VecDeque;
+use std::panic::{AssertUnwindSafe, catch_unwind};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
+use gst::prelude::*;
 use gst_base::prelude::*;
 
 use crate::light::Light;
 
 use super::video::{frame_view, is_gap, running_time};
+
+/// Lights computed as frames arrive and not yet taken, at most: the aggregator
+/// queues a frame or two per pad, so more are frames it never showed.
+const MAX_ARRIVED: usize = 8;
+
+/// Monitor frames consumed per face frame (a running mean) above which lights
+/// are no longer computed as frames arrive: most of them would go unused.
+const MAX_EAGER_RATIO: f64 = 1.25;
+
+/// Weight of the newest face frame in that running mean.
+const RATIO_WEIGHT: f64 = 0.1;
 
 /// Why a frame is relit with the predicted source light.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -75,14 +97,149 @@ struct Shown {
 pub struct Reading {
     /// Monitor frames consumed.
     pub frames: u64,
-    /// Whether a monitor frame's light was computed, and how long it took.
+    /// Whether a monitor frame's light was computed on this thread, and how long it took.
     pub decoded: Option<Duration>,
+    /// Lights of the frames consumed that were computed on the monitor stream's
+    /// thread as they arrived (used or not), and the seconds they took there.
+    pub arrived: u64,
+    pub arrived_seconds: f64,
+}
+
+impl Reading {
+    fn count_arrived(&mut self, took: Duration) {
+        self.arrived += 1;
+        self.arrived_seconds += took.as_secs_f64();
+    }
+}
+
+/// A light computed as its frame arrived.
+struct Arrived {
+    /// The frame it came from: its buffer's address and timestamp, while the
+    /// aggregator holds it.
+    buffer: usize,
+    pts: gst::ClockTime,
+    light: Light,
+    took: Duration,
+}
+
+/// What the monitor pad's probe shares with the track: the frames' lights,
+/// computed on the monitor stream's thread before the aggregator queues them.
+#[derive(Default)]
+pub struct ArrivalLights {
+    queue: Mutex<ArrivalQueue>,
+    /// Set while the monitor stream runs faster than the face stream.
+    lazy: AtomicBool,
+}
+
+#[derive(Default)]
+struct ArrivalQueue {
+    /// The stream's caps as the probe saw them, in order with its frames.
+    info: Option<gst_video::VideoInfo>,
+    lights: VecDeque<Arrived>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+impl ArrivalLights {
+    /// Computes the lights of `pad`'s frames as they arrive, from now on.
+    pub fn attach(pad: &gst_base::AggregatorPad) -> Arc<ArrivalLights> {
+        let lights = Arc::new(ArrivalLights::default());
+        let probe = lights.clone();
+        pad.add_probe(
+            gst::PadProbeType::BUFFER
+                | gst::PadProbeType::EVENT_DOWNSTREAM
+                | gst::PadProbeType::EVENT_FLUSH,
+            move |_, info| {
+                // A panic must not cross into GStreamer; the frame's light is then
+                // computed when a face frame uses it, which reports what is wrong.
+                let _ = catch_unwind(AssertUnwindSafe(|| match &info.data {
+                    Some(gst::PadProbeData::Buffer(buffer)) => probe.arrive(buffer),
+                    Some(gst::PadProbeData::Event(event)) => probe.event(event),
+                    _ => {}
+                }));
+                gst::PadProbeReturn::Ok
+            },
+        );
+        lights
+    }
+
+    fn arrive(&self, buffer: &gst::Buffer) {
+        if self.lazy.load(Ordering::Relaxed) || is_gap(buffer) {
+            return;
+        }
+        let (Some(pts), Some(info)) = (buffer.pts(), lock(&self.queue).info.clone()) else {
+            return;
+        };
+        let started = Instant::now();
+        let Some(light) = light_of(buffer, &info) else {
+            return;
+        };
+        let arrived = Arrived {
+            buffer: buffer.as_ptr() as usize,
+            pts,
+            light,
+            took: started.elapsed(),
+        };
+        let mut queue = lock(&self.queue);
+        if queue.lights.len() == MAX_ARRIVED {
+            queue.lights.pop_front();
+        }
+        queue.lights.push_back(arrived);
+    }
+
+    fn event(&self, event: &gst::Event) {
+        use gst::EventView;
+        match event.view() {
+            EventView::Caps(c) => {
+                lock(&self.queue).info = gst_video::VideoInfo::from_caps(c.caps()).ok();
+            }
+            // Frames from before are never shown, and timestamps may repeat.
+            EventView::FlushStop(_) | EventView::StreamStart(_) => self.clear(),
+            _ => {}
+        }
+    }
+
+    fn clear(&self) {
+        lock(&self.queue).lights.clear();
+    }
+
+    /// The light computed when `buffer` arrived, if it was. Lights of frames that
+    /// arrived before it were not used, and are counted in `reading`.
+    fn take(&self, buffer: &gst::Buffer, reading: &mut Reading) -> Option<Light> {
+        let pts = buffer.pts()?;
+        let address = buffer.as_ptr() as usize;
+        let mut queue = lock(&self.queue);
+        let at = queue
+            .lights
+            .iter()
+            .position(|a| a.buffer == address && a.pts == pts)?;
+        for unused in queue.lights.drain(..at) {
+            reading.count_arrived(unused.took);
+        }
+        let arrived = queue.lights.pop_front()?;
+        reading.count_arrived(arrived.took);
+        Some(arrived.light)
+    }
+}
+
+/// A frame's light, if the frame can be read with `info`.
+fn light_of(buffer: &gst::BufferRef, info: &gst_video::VideoInfo) -> Option<Light> {
+    let frame = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer, info).ok()?;
+    frame_view(&frame).map(|view| Light::from_frame(&view))
 }
 
 #[derive(Default)]
 pub struct MonitorTrack {
     info: Option<gst_video::VideoInfo>,
     current: Option<Shown>,
+    /// Lights computed as the pad's frames arrive; None before a pad is attached.
+    arrivals: Option<Arc<ArrivalLights>>,
+    /// Monitor frames consumed per face frame, a running mean from one.
+    frames_per_face: Option<f64>,
+    /// Monitor frames consumed since the last face frame's light was decided.
+    consumed: u64,
     /// The fallback in force, if any.
     fallback: Option<Fallback>,
     /// Since when face frames may have been waiting for monitor frames.
@@ -92,13 +249,35 @@ pub struct MonitorTrack {
 }
 
 impl MonitorTrack {
+    /// Computes the lights of `pad`'s frames as they arrive, for this track.
+    pub fn attach(&mut self, pad: &gst_base::AggregatorPad) {
+        self.arrivals = Some(ArrivalLights::attach(pad));
+    }
+
     /// A fresh track for a new run; caps that arrived before the start stay.
     pub fn restart(&mut self) {
         *self = MonitorTrack {
             info: self.info.take(),
             last_arrival: Some(Instant::now()),
-            ..MonitorTrack::default()
+            ..self.emptied()
         };
+    }
+
+    /// The track as it is when its element stops: nothing but its pad's probe.
+    pub fn stop(&mut self) {
+        *self = self.emptied();
+    }
+
+    fn emptied(&mut self) -> MonitorTrack {
+        let arrivals = self.arrivals.take();
+        if let Some(a) = &arrivals {
+            a.clear();
+            a.lazy.store(false, Ordering::Relaxed);
+        }
+        MonitorTrack {
+            arrivals,
+            ..MonitorTrack::default()
+        }
     }
 
     pub fn set_info(&mut self, info: gst_video::VideoInfo) {
@@ -170,13 +349,18 @@ impl MonitorTrack {
                         .duration()
                         .unwrap_or(gst::ClockTime::ZERO)
                         .max(timeout);
+                    let light = self
+                        .arrivals
+                        .as_ref()
+                        .and_then(|a| a.take(&buffer, reading));
                     self.current = Some(Shown {
                         at,
                         valid_until: at.saturating_add(hold.nseconds() as i64),
-                        frame: Some(buffer),
-                        light: None,
+                        frame: light.is_none().then_some(buffer),
+                        light,
                     });
                     reading.frames += 1;
+                    self.consumed += 1;
                     pad.drop_buffer();
                 }
                 None if pad.is_eos() => break End::Ended,
@@ -184,6 +368,7 @@ impl MonitorTrack {
                 None => return Decision::Wait,
             }
         };
+        self.note_rate();
         let info = self.info.as_ref();
         let mut known = |c: &mut Shown| {
             let decoding = c.light.is_none();
@@ -214,6 +399,18 @@ impl MonitorTrack {
         }
     }
 
+    /// Follows how many monitor frames each face frame consumes, and has their
+    /// lights computed as they arrive only while that stays near one or below.
+    fn note_rate(&mut self) {
+        let consumed = std::mem::take(&mut self.consumed) as f64;
+        let mean = self.frames_per_face.unwrap_or(1.0);
+        let mean = mean + RATIO_WEIGHT * (consumed - mean);
+        self.frames_per_face = Some(mean);
+        if let Some(a) = &self.arrivals {
+            a.lazy.store(mean > MAX_EAGER_RATIO, Ordering::Relaxed);
+        }
+    }
+
     /// Records the fallback in force for this frame; returns the change the user
     /// should hear about, if any. Having no monitor pad at all is not news.
     pub fn note_fallback(&mut self, fallback: Option<Fallback>) -> Option<Transition> {
@@ -236,13 +433,119 @@ impl Shown {
         if self.light.is_none()
             && let (Some(buffer), Some(info)) = (self.frame.as_ref(), info)
         {
-            self.light = gst_video::VideoFrameRef::from_buffer_ref_readable(buffer.as_ref(), info)
-                .ok()
-                .and_then(|f| frame_view(&f).map(|view| Light::from_frame(&view)));
+            self.light = light_of(buffer, info);
             if self.light.is_some() {
                 self.frame = None;
             }
         }
         self.light.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const W: u32 = 32;
+    const H: u32 = 16;
+
+    fn info() -> gst_video::VideoInfo {
+        gst_video::VideoInfo::builder(gst_video::VideoFormat::Rgbx, W, H)
+            .build()
+            .unwrap()
+    }
+
+    /// A screen frame of one colour, shown at `ms`.
+    fn screen(rgb: [u8; 3], ms: u64) -> gst::Buffer {
+        let pixels: Vec<u8> = (0..W * H)
+            .flat_map(|_| [rgb[0], rgb[1], rgb[2], 0])
+            .collect();
+        let mut buffer = gst::Buffer::from_mut_slice(pixels);
+        buffer
+            .get_mut()
+            .unwrap()
+            .set_pts(gst::ClockTime::from_mseconds(ms));
+        buffer
+    }
+
+    /// Lights with the stream's caps seen, as the probe sees them.
+    fn with_caps() -> ArrivalLights {
+        gst::init().unwrap();
+        let lights = ArrivalLights::default();
+        lights.event(&gst::event::Caps::new(&info().to_caps().unwrap()));
+        lights
+    }
+
+    #[test]
+    fn a_frame_gets_the_light_computed_when_it_arrived() {
+        let lights = with_caps();
+        let frames = [
+            screen([250, 250, 250], 0),
+            screen([20, 40, 200], 33),
+            screen([200, 90, 10], 67),
+        ];
+        for f in &frames {
+            lights.arrive(f);
+        }
+        let mut reading = Reading::default();
+        let light = lights.take(&frames[1], &mut reading);
+        assert_eq!(light, light_of(&frames[1], &info()));
+        assert_ne!(light, light_of(&frames[0], &info()));
+        // The first frame's light went unused, and is counted with the second's.
+        assert_eq!(reading.arrived, 2);
+        assert_eq!(lights.take(&frames[0], &mut reading), None);
+        assert_eq!(
+            lights.take(&frames[2], &mut reading),
+            light_of(&frames[2], &info())
+        );
+        assert_eq!(reading.arrived, 3);
+    }
+
+    #[test]
+    fn only_the_buffer_that_arrived_matches() {
+        let lights = with_caps();
+        let arrived = screen([250, 250, 250], 0);
+        lights.arrive(&arrived);
+        // Another buffer at the same time (after a seek, say) is not that frame.
+        let other = screen([20, 40, 200], 0);
+        let mut reading = Reading::default();
+        assert_eq!(lights.take(&other, &mut reading), None);
+        assert!(lights.take(&arrived, &mut reading).is_some());
+    }
+
+    #[test]
+    fn nothing_is_computed_while_lazy_without_caps_or_after_a_flush() {
+        let lights = with_caps();
+        let mut reading = Reading::default();
+        lights.lazy.store(true, Ordering::Relaxed);
+        let first = screen([250, 250, 250], 0);
+        lights.arrive(&first);
+        assert_eq!(lights.take(&first, &mut reading), None);
+
+        lights.lazy.store(false, Ordering::Relaxed);
+        let second = screen([250, 250, 250], 33);
+        lights.arrive(&second);
+        lights.event(&gst::event::FlushStop::new(true));
+        assert_eq!(lights.take(&second, &mut reading), None);
+
+        let uncapped = ArrivalLights::default();
+        uncapped.arrive(&second);
+        assert_eq!(uncapped.take(&second, &mut reading), None);
+        assert_eq!(reading.arrived, 0);
+    }
+
+    #[test]
+    fn at_most_a_few_lights_wait() {
+        let lights = with_caps();
+        let frames: Vec<_> = (0..MAX_ARRIVED as u64 + 3)
+            .map(|k| screen([250, 250, 250], 33 * k))
+            .collect();
+        for f in &frames {
+            lights.arrive(f);
+        }
+        assert_eq!(lights.queue.lock().unwrap().lights.len(), MAX_ARRIVED);
+        let mut reading = Reading::default();
+        assert_eq!(lights.take(&frames[0], &mut reading), None);
+        assert!(lights.take(frames.last().unwrap(), &mut reading).is_some());
     }
 }

@@ -4,6 +4,7 @@
 
 use std::time::Instant;
 
+use super::monitor::Reading;
 use crate::engine::PolicyCounts;
 
 #[derive(Debug, Default, Clone, Copy)]
@@ -15,22 +16,15 @@ pub struct Stats {
     pub paste_seconds: f64,
     /// Seconds denoising (`denoise`), beside the network on frames it relit.
     pub denoise_seconds: f64,
-    /// Seconds spent turning monitor frames into lights.
-    pub monitor_light_seconds: f64,
     pub known_source: u64,
     pub predicted_source: u64,
     pub fallbacks: u64,
-    /// Monitor frames that arrived.
-    pub monitor_frames: u64,
-    /// Monitor frames whose light was computed: the ones face frames used.
-    pub monitor_decoded: u64,
+    /// The monitor stream's frames and their lights.
+    pub monitor: StreamLights,
     pub monitor_out: u64,
     pub monitor_dropped: u64,
-    /// Target-stream frames that arrived, and those whose light was computed (the
-    /// ones face frames used), and the seconds that took.
-    pub target_stream_frames: u64,
-    pub target_stream_decoded: u64,
-    pub target_stream_light_seconds: f64,
+    /// The video target's frames and their lights.
+    pub target_stream: StreamLights,
     /// Seconds encoding target lights on the streaming thread (first targets,
     /// crossfades, video targets).
     pub target_seconds: f64,
@@ -42,6 +36,41 @@ pub struct Stats {
     /// The policy's counts as of the last frame; kept after stop, so the last
     /// run's figures stay readable.
     pub policy: PolicyCounts,
+}
+
+/// A stream of screen frames (the monitor stream, the video target) turned into lights.
+#[derive(Debug, Default, Clone, Copy)]
+pub struct StreamLights {
+    /// Frames consumed.
+    pub frames: u64,
+    /// Lights computed on the element's thread, when a face frame needed them,
+    /// and the seconds they took there: what face frames waited for.
+    pub decoded: u64,
+    pub light_seconds: f64,
+    /// Lights computed on the stream's own thread as its frames arrived, and the
+    /// seconds they took there.
+    pub arrival_decoded: u64,
+    pub arrival_seconds: f64,
+}
+
+impl StreamLights {
+    pub fn add(&mut self, reading: &Reading) {
+        self.frames += reading.frames;
+        if let Some(t) = reading.decoded {
+            self.decoded += 1;
+            self.light_seconds += t.as_secs_f64();
+        }
+        self.arrival_decoded += reading.arrived;
+        self.arrival_seconds += reading.arrived_seconds;
+    }
+
+    fn write(&self, s: gst::structure::Builder, stream: &str) -> gst::structure::Builder {
+        s.field(format!("{stream}-frames"), self.frames)
+            .field(format!("{stream}-decoded"), self.decoded)
+            .field(format!("{stream}-light-seconds"), self.light_seconds)
+            .field(format!("{stream}-arrival-decoded"), self.arrival_decoded)
+            .field(format!("{stream}-arrival-seconds"), self.arrival_seconds)
+    }
 }
 
 /// Seconds a face frame spends outside the network, the crop and the paste,
@@ -86,7 +115,7 @@ impl Stats {
         // The policy's time that is not the crop, the network, smoothing or the change.
         let decide =
             s.policy - p.crop_seconds - p.network_seconds - p.filter_seconds - p.change_seconds;
-        gst::Structure::builder("lsydrelight-stats")
+        let builder = gst::Structure::builder("lsydrelight-stats")
             .field("frames", self.frames)
             .field("relit", p.relit)
             .field("passed-through", p.passed_non_finite)
@@ -109,26 +138,18 @@ impl Stats {
             .field("setup-seconds", s.setup)
             .field("finish-seconds", s.finish)
             .field("frame-seconds", s.frame)
-            .field("monitor-light-seconds", self.monitor_light_seconds)
             .field("known-source", self.known_source)
             .field("predicted-source", self.predicted_source)
             .field("fallbacks", self.fallbacks)
             .field("resets", p.resets)
-            .field("monitor-frames", self.monitor_frames)
-            .field("monitor-decoded", self.monitor_decoded)
             .field("monitor-out", self.monitor_out)
             .field("monitor-dropped", self.monitor_dropped)
             .field("target-encodes", p.target_encodes)
             .field("source-encodes", p.source_encodes)
             .field("target-seconds", self.target_seconds)
-            .field("target-stream-frames", self.target_stream_frames)
-            .field("target-stream-decoded", self.target_stream_decoded)
-            .field(
-                "target-stream-light-seconds",
-                self.target_stream_light_seconds,
-            )
             .field("light-predictions", p.predictions)
-            .field("non-finite", p.passed_non_finite)
-            .build()
+            .field("non-finite", p.passed_non_finite);
+        let builder = self.monitor.write(builder, "monitor");
+        self.target_stream.write(builder, "target-stream").build()
     }
 }
