@@ -418,8 +418,8 @@ fn timing() -> Result<(), String> {
             f("processing-seconds") * 1e3 / frames as f64,
             f("target-seconds") * 1e3,
             stat(&e, "target-encodes"),
-            f("target-stream-light-seconds") * 1e3,
-            stat(&e, "target-stream-decoded"),
+            (f("target-stream-light-seconds") + f("target-stream-arrival-seconds")) * 1e3,
+            stat(&e, "target-stream-decoded") + stat(&e, "target-stream-arrival-decoded"),
         )
     };
     let (still, ..) = run(false, false);

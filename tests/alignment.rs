@@ -31,6 +31,8 @@ struct Run {
     monitor: Vec<u64>,
     /// Per face frame, the running time of the monitor frame the element used.
     used: Vec<Option<u64>>,
+    /// Per face frame, the relit frame's bytes.
+    relit: Vec<Vec<u8>>,
     element: gst::Element,
 }
 
@@ -82,8 +84,9 @@ fn run_non_live(
     let to_push = monitor.clone();
     let pusher = thread::spawn(move || {
         let d = gst::ClockTime::from_nseconds(1_000_000_000 / monitor_fps);
-        for (k, &t) in to_push.iter().enumerate() {
-            let colour = if k % 2 == 0 {
+        for &t in &to_push {
+            // The screen's colour changes every 1/30 s, whatever its frame rate.
+            let colour = if (t * 30 / 1_000_000_000) % 2 == 0 {
                 Vec3::new(0.9, 0.9, 0.9)
             } else {
                 Vec3::new(0.2, 0.2, 0.5)
@@ -102,24 +105,32 @@ fn run_non_live(
         .map(|i| i * 1_000_000_000 / face_fps)
         .collect();
     let d = gst::ClockTime::from_nseconds(1_000_000_000 / face_fps);
-    let mut used = Vec::new();
+    let mut out = Vec::new();
     for &t in &faces {
         h.push(buffer(face_rgb(), &c, gst::ClockTime::from_nseconds(t), d))
             .unwrap();
         while let Some(b) = h.try_pull() {
-            used.push(monitor_time(&b).map(|t| t.nseconds()));
+            out.push(b);
         }
     }
     h.push_event(gst::event::Eos::new());
-    while used.len() < faces.len() {
-        let b = h.pull().expect("every face frame comes out");
-        used.push(monitor_time(&b).map(|t| t.nseconds()));
+    while out.len() < faces.len() {
+        out.push(h.pull().expect("every face frame comes out"));
     }
+    let used = out
+        .iter()
+        .map(|b| monitor_time(b).map(|t| t.nseconds()))
+        .collect();
+    let relit = out
+        .iter()
+        .map(|b| b.map_readable().unwrap().to_vec())
+        .collect();
     pusher.join().unwrap();
     Run {
         faces,
         monitor,
         used,
+        relit,
         element: e,
     }
 }
@@ -147,15 +158,35 @@ fn faster_and_slower_monitor_streams() {
     let last_face = *fast.faces.last().unwrap();
     let shown = fast.monitor.iter().filter(|&&m| m <= last_face).count() as u64;
     assert_eq!(stat(&fast.element, "monitor-frames"), shown);
+    // (About 9 lights on arrival here: the mean of frames a face frame consumes
+    // passes 1.25 at the fourth face frame; computing every one would be 120.)
     let on_arrival = stat(&fast.element, "monitor-arrival-decoded");
-    assert!(on_arrival <= 10, "{on_arrival} lights computed on arrival");
+    assert!(on_arrival <= 16, "{on_arrival} lights computed on arrival");
     assert!(
-        stat(&fast.element, "monitor-decoded") + on_arrival <= fast.faces.len() as u64 + 5,
+        stat(&fast.element, "monitor-decoded") + on_arrival <= fast.faces.len() as u64 + 16,
         "lights of frames no face frame used were computed"
     );
     let slow = run_non_live(30, 10, 2, 0, 0, u64::MAX);
     slow.check(0, "30 fps face, 10 fps monitor");
     assert_eq!(stat(&slow.element, "monitor-decoded"), 0);
+}
+
+#[test]
+fn lights_computed_as_frames_arrive_relight_as_those_computed_when_used() {
+    // The screen changes colour every 1/30 s. At 30 fps every light is computed as
+    // its frame arrives; at 60 fps (each colour shown twice) the lights are computed
+    // when a face frame uses them, after the first few frames.
+    let eager = run_non_live(30, 30, 1, 0, 0, u64::MAX);
+    let lazy = run_non_live(30, 60, 1, 0, 0, u64::MAX);
+    assert_eq!(stat(&eager.element, "monitor-decoded"), 0);
+    assert!(stat(&lazy.element, "monitor-decoded") >= lazy.faces.len() as u64 - 5);
+    assert_ne!(
+        eager.relit[10], eager.relit[11],
+        "the screen's colour changes the relit face"
+    );
+    for (k, (a, b)) in eager.relit.iter().zip(&lazy.relit).enumerate() {
+        assert!(a == b, "face frame {k} relit differently");
+    }
 }
 
 #[test]

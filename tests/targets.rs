@@ -298,15 +298,16 @@ fn a_video_target_lights_the_face_frame_by_frame_and_keeps_its_last_frame() {
         out.push(to_rgb(&h.pull().unwrap(), &c));
     }
     pusher.join().unwrap();
-    // One light per target frame used, and a code only when the light changes:
-    // the start's target, white, blue.
-    let (arrived, decoded) = (
+    // One light per target frame, computed on the target stream's thread as it
+    // arrived, and a code only when the light changes: the start's target, white, blue.
+    let (arrived, on_arrival, decoded) = (
         stat(&e, "target-stream-frames"),
+        stat(&e, "target-stream-arrival-decoded"),
         stat(&e, "target-stream-decoded"),
     );
     assert!(
-        (9..=10).contains(&arrived) && decoded <= arrived,
-        "{arrived}, {decoded}"
+        (9..=10).contains(&arrived) && on_arrival == arrived && decoded == 0,
+        "{arrived} frames, {on_arrival} lights on arrival, {decoded} when used"
     );
     assert_eq!(stat(&e, "target-encodes"), 3);
     let (white, blue, after) = (mean(&out[10]), mean(&out[25]), mean(&out[40]));

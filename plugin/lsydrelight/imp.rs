@@ -8,7 +8,7 @@
 //! ([`super::side_stream`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, LazyLock, Mutex, MutexGuard};
+use std::sync::{Arc, LazyLock, Mutex};
 use std::time::{Duration, Instant};
 
 use gst::glib;
@@ -17,7 +17,6 @@ use gst::subclass::prelude::*;
 use gst_base::prelude::*;
 use gst_base::subclass::prelude::*;
 
-use super::ExecutionProvider;
 use super::match_check::{self, MatchCheck};
 use super::monitor::{Decision, Fallback, MonitorTrack, Reading, Transition};
 use super::qos::{self, Qos};
@@ -30,6 +29,7 @@ use super::video::{
     self, caps_advice, face_size_problem, frame_duration, frame_view, is_gap, running_time,
     with_frame_mut,
 };
+use super::{ExecutionProvider, lock};
 use crate::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Prepared, Provider, Relighter, Reuse,
     Source,
@@ -104,10 +104,6 @@ impl State {
         self.last_face_rt = None;
         self.policy.reset()
     }
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
 
 impl LsydRelight {
@@ -186,8 +182,10 @@ impl LsydRelight {
         settings: &Settings,
     ) -> Option<(Source, Option<i64>)> {
         let mut reading = Reading::default();
+        // The pad slot before the track, as everywhere: never the other way round.
+        let pad = self.monitor_pad();
         let mut track = lock(&self.monitor);
-        let decision = match self.monitor_pad() {
+        let decision = match pad {
             Some(pad) => track.consume(
                 &pad,
                 face_rt,
@@ -1158,8 +1156,9 @@ impl AggregatorImpl for LsydRelight {
         let pad = gst::PadBuilder::<gst_base::AggregatorPad>::from_template(templ)
             .name(name)
             .build();
-        lock(track).attach(&pad);
         *held = Some(pad.clone());
+        drop(held);
+        lock(track).attach(&pad);
         gst::debug!(CAT, imp = self, "{name} requested");
         Some(pad)
     }

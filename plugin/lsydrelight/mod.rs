@@ -127,3 +127,9 @@ pub fn register(plugin: &gst::Plugin) -> Result<(), glib::BoolError> {
         LsydRelight::static_type(),
     )
 }
+
+/// Locks `m`, taking its data even when a thread panicked while holding it: the
+/// panic was caught and reported where it happened, and the element goes on.
+fn lock<T>(m: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}

@@ -17,7 +17,7 @@
 use std::collections::VecDeque;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use gst::prelude::*;
@@ -25,11 +25,13 @@ use gst_base::prelude::*;
 
 use crate::light::Light;
 
+use super::lock;
 use super::video::{frame_view, is_gap, running_time};
 
-/// Lights computed as frames arrive and not yet taken, at most: the aggregator
-/// queues a frame or two per pad, so more are frames it never showed.
-const MAX_ARRIVED: usize = 8;
+/// Lights computed as frames arrive and not yet taken, at most. The aggregator
+/// queues a pad's frames up to its latency (one frame in a non-live pipeline);
+/// beyond this many, further frames get their light when a face frame uses them.
+const MAX_ARRIVED: usize = 32;
 
 /// Monitor frames consumed per face frame (a running mean) above which lights
 /// are no longer computed as frames arrive: most of them would go unused.
@@ -99,17 +101,10 @@ pub struct Reading {
     pub frames: u64,
     /// Whether a monitor frame's light was computed on this thread, and how long it took.
     pub decoded: Option<Duration>,
-    /// Lights of the frames consumed that were computed on the monitor stream's
-    /// thread as they arrived (used or not), and the seconds they took there.
-    pub arrived: u64,
-    pub arrived_seconds: f64,
-}
-
-impl Reading {
-    fn count_arrived(&mut self, took: Duration) {
-        self.arrived += 1;
-        self.arrived_seconds += took.as_secs_f64();
-    }
+    /// Lights computed on the monitor stream's thread as frames arrived since the
+    /// last reading (used or not), and the time they took there.
+    pub arrival_decoded: u64,
+    pub arrival_time: Duration,
 }
 
 /// A light computed as its frame arrived.
@@ -119,7 +114,6 @@ struct Arrived {
     buffer: usize,
     pts: gst::ClockTime,
     light: Light,
-    took: Duration,
 }
 
 /// What the monitor pad's probe shares with the track: the frames' lights,
@@ -133,13 +127,13 @@ pub struct ArrivalLights {
 
 #[derive(Default)]
 struct ArrivalQueue {
-    /// The stream's caps as the probe saw them, in order with its frames.
+    /// The stream's caps as the probe saw them, in order with its frames (the
+    /// element's own `sink_event` sees them later, when the aggregator gets to them).
     info: Option<gst_video::VideoInfo>,
     lights: VecDeque<Arrived>,
-}
-
-fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
+    /// Lights computed and the time they took, since the track last read them.
+    computed: u64,
+    time: Duration,
 }
 
 impl ArrivalLights {
@@ -169,24 +163,29 @@ impl ArrivalLights {
         if self.lazy.load(Ordering::Relaxed) || is_gap(buffer) {
             return;
         }
-        let (Some(pts), Some(info)) = (buffer.pts(), lock(&self.queue).info.clone()) else {
+        let info = {
+            let queue = lock(&self.queue);
+            if queue.lights.len() >= MAX_ARRIVED {
+                return;
+            }
+            queue.info.clone()
+        };
+        let (Some(pts), Some(info)) = (buffer.pts(), info) else {
             return;
         };
         let started = Instant::now();
         let Some(light) = light_of(buffer, &info) else {
             return;
         };
-        let arrived = Arrived {
+        let took = started.elapsed();
+        let mut queue = lock(&self.queue);
+        queue.computed += 1;
+        queue.time += took;
+        queue.lights.push_back(Arrived {
             buffer: buffer.as_ptr() as usize,
             pts,
             light,
-            took: started.elapsed(),
-        };
-        let mut queue = lock(&self.queue);
-        if queue.lights.len() == MAX_ARRIVED {
-            queue.lights.pop_front();
-        }
-        queue.lights.push_back(arrived);
+        });
     }
 
     fn event(&self, event: &gst::Event) {
@@ -195,32 +194,47 @@ impl ArrivalLights {
             EventView::Caps(c) => {
                 lock(&self.queue).info = gst_video::VideoInfo::from_caps(c.caps()).ok();
             }
-            // Frames from before are never shown, and timestamps may repeat.
-            EventView::FlushStop(_) | EventView::StreamStart(_) => self.clear(),
+            // The aggregator drops the frames it held at the flush.
+            EventView::FlushStop(_) => lock(&self.queue).lights.clear(),
             _ => {}
         }
     }
 
-    fn clear(&self) {
-        lock(&self.queue).lights.clear();
+    /// Forgets the lights and caps of a run that has stopped.
+    fn stop(&self) {
+        let mut queue = lock(&self.queue);
+        queue.lights.clear();
+        queue.info = None;
+        self.lazy.store(false, Ordering::Relaxed);
     }
 
-    /// The light computed when `buffer` arrived, if it was. Lights of frames that
-    /// arrived before it were not used, and are counted in `reading`.
-    fn take(&self, buffer: &gst::Buffer, reading: &mut Reading) -> Option<Light> {
+    /// Counts the lights computed since the last reading into `reading`.
+    fn read_counts(&self, reading: &mut Reading) {
+        let mut queue = lock(&self.queue);
+        reading.arrival_decoded += std::mem::take(&mut queue.computed);
+        reading.arrival_time += std::mem::take(&mut queue.time);
+    }
+
+    /// The light computed when `buffer` arrived, if it was. The aggregator hands
+    /// frames on in the order they came, so lights of frames before it are no
+    /// longer needed.
+    fn take(&self, buffer: &gst::Buffer) -> Option<Light> {
         let pts = buffer.pts()?;
         let address = buffer.as_ptr() as usize;
         let mut queue = lock(&self.queue);
-        let at = queue
+        match queue
             .lights
             .iter()
-            .position(|a| a.buffer == address && a.pts == pts)?;
-        for unused in queue.lights.drain(..at) {
-            reading.count_arrived(unused.took);
+            .position(|a| a.buffer == address && a.pts == pts)
+        {
+            Some(at) => queue.lights.drain(..=at).next_back().map(|a| a.light),
+            None => {
+                // Not computed (the queue was full, or it came while lazy); lights
+                // still queued before it in time are of frames already gone.
+                queue.lights.retain(|a| a.pts >= pts);
+                None
+            }
         }
-        let arrived = queue.lights.pop_front()?;
-        reading.count_arrived(arrived.took);
-        Some(arrived.light)
     }
 }
 
@@ -238,8 +252,12 @@ pub struct MonitorTrack {
     arrivals: Option<Arc<ArrivalLights>>,
     /// Monitor frames consumed per face frame, a running mean from one.
     frames_per_face: Option<f64>,
-    /// Monitor frames consumed since the last face frame's light was decided.
+    /// Monitor frames consumed since the last face frame counted in that mean: a
+    /// face frame may take several calls of `consume` (it waits for monitor data,
+    /// or for the video target), each with its own [`Reading`].
     consumed: u64,
+    /// The last face frame counted in that mean.
+    counted_face: Option<i64>,
     /// The fallback in force, if any.
     fallback: Option<Fallback>,
     /// Since when face frames may have been waiting for monitor frames.
@@ -259,25 +277,20 @@ impl MonitorTrack {
         *self = MonitorTrack {
             info: self.info.take(),
             last_arrival: Some(Instant::now()),
-            ..self.emptied()
+            arrivals: self.arrivals.take(),
+            ..MonitorTrack::default()
         };
     }
 
-    /// The track as it is when its element stops: nothing but its pad's probe.
+    /// Forgets the run that stopped, caps and all; its pad's probe stays.
     pub fn stop(&mut self) {
-        *self = self.emptied();
-    }
-
-    fn emptied(&mut self) -> MonitorTrack {
-        let arrivals = self.arrivals.take();
-        if let Some(a) = &arrivals {
-            a.clear();
-            a.lazy.store(false, Ordering::Relaxed);
+        if let Some(a) = &self.arrivals {
+            a.stop();
         }
-        MonitorTrack {
-            arrivals,
+        *self = MonitorTrack {
+            arrivals: self.arrivals.take(),
             ..MonitorTrack::default()
-        }
+        };
     }
 
     pub fn set_info(&mut self, info: gst_video::VideoInfo) {
@@ -349,10 +362,7 @@ impl MonitorTrack {
                         .duration()
                         .unwrap_or(gst::ClockTime::ZERO)
                         .max(timeout);
-                    let light = self
-                        .arrivals
-                        .as_ref()
-                        .and_then(|a| a.take(&buffer, reading));
+                    let light = self.arrivals.as_ref().and_then(|a| a.take(&buffer));
                     self.current = Some(Shown {
                         at,
                         valid_until: at.saturating_add(hold.nseconds() as i64),
@@ -368,7 +378,10 @@ impl MonitorTrack {
                 None => return Decision::Wait,
             }
         };
-        self.note_rate();
+        if let Some(a) = &self.arrivals {
+            a.read_counts(reading);
+        }
+        self.note_rate(target);
         let info = self.info.as_ref();
         let mut known = |c: &mut Shown| {
             let decoding = c.light.is_none();
@@ -401,7 +414,11 @@ impl MonitorTrack {
 
     /// Follows how many monitor frames each face frame consumes, and has their
     /// lights computed as they arrive only while that stays near one or below.
-    fn note_rate(&mut self) {
+    fn note_rate(&mut self, face: Option<i64>) {
+        if face.is_some() && face == self.counted_face {
+            return;
+        }
+        self.counted_face = face;
         let consumed = std::mem::take(&mut self.consumed) as f64;
         let mean = self.frames_per_face.unwrap_or(1.0);
         let mean = mean + RATIO_WEIGHT * (consumed - mean);
@@ -476,6 +493,12 @@ mod tests {
         lights
     }
 
+    fn computed(lights: &ArrivalLights) -> u64 {
+        let mut reading = Reading::default();
+        lights.read_counts(&mut reading);
+        reading.arrival_decoded
+    }
+
     #[test]
     fn a_frame_gets_the_light_computed_when_it_arrived() {
         let lights = with_caps();
@@ -487,18 +510,13 @@ mod tests {
         for f in &frames {
             lights.arrive(f);
         }
-        let mut reading = Reading::default();
-        let light = lights.take(&frames[1], &mut reading);
+        assert_eq!(computed(&lights), 3);
+        let light = lights.take(&frames[1]);
         assert_eq!(light, light_of(&frames[1], &info()));
         assert_ne!(light, light_of(&frames[0], &info()));
-        // The first frame's light went unused, and is counted with the second's.
-        assert_eq!(reading.arrived, 2);
-        assert_eq!(lights.take(&frames[0], &mut reading), None);
-        assert_eq!(
-            lights.take(&frames[2], &mut reading),
-            light_of(&frames[2], &info())
-        );
-        assert_eq!(reading.arrived, 3);
+        // The aggregator hands frames on in order: the first one is gone.
+        assert_eq!(lights.take(&frames[0]), None);
+        assert_eq!(lights.take(&frames[2]), light_of(&frames[2], &info()));
     }
 
     #[test]
@@ -508,34 +526,46 @@ mod tests {
         lights.arrive(&arrived);
         // Another buffer at the same time (after a seek, say) is not that frame.
         let other = screen([20, 40, 200], 0);
-        let mut reading = Reading::default();
-        assert_eq!(lights.take(&other, &mut reading), None);
-        assert!(lights.take(&arrived, &mut reading).is_some());
+        assert_eq!(lights.take(&other), None);
+        assert!(lights.take(&arrived).is_some());
     }
 
     #[test]
-    fn nothing_is_computed_while_lazy_without_caps_or_after_a_flush() {
+    fn a_frame_not_computed_lets_go_of_the_lights_before_it() {
         let lights = with_caps();
-        let mut reading = Reading::default();
+        let earlier = screen([250, 250, 250], 0);
+        lights.arrive(&earlier);
+        let missed = screen([20, 40, 200], 33);
+        let later = screen([200, 90, 10], 67);
+        lights.arrive(&later);
+        assert_eq!(lights.take(&missed), None);
+        assert_eq!(lights.take(&earlier), None);
+        assert!(lights.take(&later).is_some());
+    }
+
+    #[test]
+    fn nothing_is_computed_while_lazy_without_caps_or_after_a_flush_or_stop() {
+        let lights = with_caps();
         lights.lazy.store(true, Ordering::Relaxed);
         let first = screen([250, 250, 250], 0);
         lights.arrive(&first);
-        assert_eq!(lights.take(&first, &mut reading), None);
+        assert_eq!(lights.take(&first), None);
+        assert_eq!(computed(&lights), 0);
 
         lights.lazy.store(false, Ordering::Relaxed);
         let second = screen([250, 250, 250], 33);
         lights.arrive(&second);
         lights.event(&gst::event::FlushStop::new(true));
-        assert_eq!(lights.take(&second, &mut reading), None);
+        assert_eq!(lights.take(&second), None);
 
-        let uncapped = ArrivalLights::default();
-        uncapped.arrive(&second);
-        assert_eq!(uncapped.take(&second, &mut reading), None);
-        assert_eq!(reading.arrived, 0);
+        lights.stop();
+        let third = screen([250, 250, 250], 67);
+        lights.arrive(&third);
+        assert_eq!(lights.take(&third), None, "the caps went with the run");
     }
 
     #[test]
-    fn at_most_a_few_lights_wait() {
+    fn frames_beyond_the_queue_get_their_light_later() {
         let lights = with_caps();
         let frames: Vec<_> = (0..MAX_ARRIVED as u64 + 3)
             .map(|k| screen([250, 250, 250], 33 * k))
@@ -543,9 +573,9 @@ mod tests {
         for f in &frames {
             lights.arrive(f);
         }
-        assert_eq!(lights.queue.lock().unwrap().lights.len(), MAX_ARRIVED);
-        let mut reading = Reading::default();
-        assert_eq!(lights.take(&frames[0], &mut reading), None);
-        assert!(lights.take(frames.last().unwrap(), &mut reading).is_some());
+        assert_eq!(computed(&lights), MAX_ARRIVED as u64);
+        // The first frames, which the aggregator hands on first, keep theirs.
+        assert!(lights.take(&frames[0]).is_some());
+        assert_eq!(lights.take(frames.last().unwrap()), None);
     }
 }

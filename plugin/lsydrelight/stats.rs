@@ -60,8 +60,8 @@ impl StreamLights {
             self.decoded += 1;
             self.light_seconds += t.as_secs_f64();
         }
-        self.arrival_decoded += reading.arrived;
-        self.arrival_seconds += reading.arrived_seconds;
+        self.arrival_decoded += reading.arrival_decoded;
+        self.arrival_seconds += reading.arrival_time.as_secs_f64();
     }
 
     fn write(&self, s: gst::structure::Builder, stream: &str) -> gst::structure::Builder {

@@ -6,6 +6,7 @@
 //! frame; the streaming thread only fades to it and encodes it, when its
 //! generation is newer than the one the stream has.
 
+use super::lock;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -133,8 +134,4 @@ impl TargetSlot {
             .then(|| self.decoded.clone().map(|l| (l, self.generation)))
             .flatten()
     }
-}
-
-fn lock<T>(m: &std::sync::Mutex<T>) -> std::sync::MutexGuard<'_, T> {
-    m.lock().unwrap_or_else(|p| p.into_inner())
 }
