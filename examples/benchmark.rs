@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
-//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 2] [--model models/default] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 0] [--model models/default] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
@@ -121,6 +121,9 @@ struct LatencyResult {
     finish_ms: f64,
     #[serde(default)]
     frame_ms: f64,
+    /// The network's threads, as the element chose them.
+    #[serde(default)]
+    network_threads: u32,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -359,6 +362,7 @@ fn latency(
         setup_ms: per_frame_ms("setup-seconds"),
         finish_ms: per_frame_ms("finish-seconds"),
         frame_ms: per_frame_ms("frame-seconds"),
+        network_threads: stats.get::<u32>("network-threads").unwrap_or(0),
     })
 }
 
@@ -420,7 +424,8 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
         name: name.into(),
         group: group.into(),
         model: model.to_path_buf(),
-        threads: 2,
+        // The element's own choice, as shipped.
+        threads: 0,
         properties: vec![],
         recordings: all(&["cuts"]),
         latency_sizes: vec![],
@@ -477,12 +482,12 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             });
         }
     }
-    // Threads.
+    // Threads: 2 for the network whatever the denoising beside it needs.
     v.push(Variant {
-        threads: 1,
+        threads: 2,
         latency_sizes: vec![(1280, 720)],
         ..with(
-            base("default, 1 thread", "threads", &default),
+            base("default, 2 threads", "threads", &default),
             &[("reuse-interval", "1")],
         )
     });
@@ -565,10 +570,17 @@ fn stages(rounds: usize, only: &[String], threads: u32, model: &Path) -> Result<
         .iter()
         .map(|(gpu, ms)| format!("{ms} ms on {gpu}"))
         .collect();
+    let mut chosen: Vec<u32> = runs.iter().flatten().map(|r| r.network_threads).collect();
+    chosen.dedup();
+    let network_threads = match (threads, &chosen[..]) {
+        (0, [n]) => format!("{n} thread(s), the element's choice"),
+        (0, _) => format!("the element's choice of threads ({chosen:?})"),
+        (n, _) => format!("{n} thread(s)"),
+    };
     let mut out = vec![
         format!(
             "Per frame, every frame through the network (`{}`), one frame in flight, network on \
-             {threads} thread(s); median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
+             {network_threads}; median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
              on this 2-core CPU. Published anchor, not measured here: NVIDIA Maxine video \
              relighting at 720p, {}.",
             model.strip_prefix(checkout()).unwrap_or(model).display(),
@@ -964,8 +976,8 @@ struct Args {
     /// --stages: cases such as 1280x720/I420; --reuse: recordings and sizes such as steady,1280x720.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
-    /// --stages: the network's threads.
-    #[arg(long, default_value_t = 2)]
+    /// --stages: the network's threads (0: the element's choice).
+    #[arg(long, default_value_t = 0)]
     threads: u32,
     /// --stages: the model folder (default: models/default).
     #[arg(long, requires = "stages")]

@@ -304,6 +304,92 @@ fn prediction_runs_only_when_someone_needs_it() {
     );
 }
 
+/// A monitor frame of one colour (8-bit sRGB) in `caps`, stamped at frame `i`.
+fn monitor_frame(rgb: [u8; 3], caps: &gst::Caps, i: u64) -> gst::Buffer {
+    let info = gst_video::VideoInfo::from_caps(caps).unwrap();
+    let mut img = deskstage::monitor::RgbImage::new(info.width() as usize, info.height() as usize);
+    img.data
+        .chunks_mut(3)
+        .for_each(|px| px.copy_from_slice(&rgb));
+    buffer(&img, caps, frame_time(i), FRAME)
+}
+
+#[test]
+fn a_monitor_stream_that_changes_format_and_size_is_read_in_its_new_caps() {
+    // A screen capture renegotiates mid-call (a window resized, another
+    // format): the frames after the caps event are read in the new caps, and
+    // relight the face as a stream in those caps from the start does.
+    init();
+    const RED: [u8; 3] = [230, 40, 30];
+    const BLUE: [u8; 3] = [30, 60, 230];
+    let rgb = rgb_caps(256, 144, 30);
+    let bgrx = caps(gst_video::VideoFormat::Bgrx, 64, 36, 30);
+    // The light of each frame alone, nothing carried between frames: the
+    // outputs compare frame by frame.
+    let run = |monitor: &dyn Fn(u64) -> ([u8; 3], gst::Caps)| {
+        let e = element();
+        e.set_property("alpha", 1.0f32);
+        e.set_property("average-frames", 1u32);
+        e.set_property("reuse-interval", 1u32);
+        e.set_property("denoise", false);
+        let mut h = Harness::with_element(&e, Some("sink"), Some("src"));
+        let mut mh = Harness::with_element(&e, Some("monitor_sink"), None);
+        let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+        h.set_src_caps(c.clone());
+        let mut shown = None;
+        let mut outs = Vec::new();
+        // A face frame goes in before the monitor frame after it (see
+        // `prediction_runs_only_when_someone_needs_it`).
+        for i in 0..7 {
+            let (colour, caps) = monitor(i);
+            if shown.as_ref() != Some(&caps) {
+                mh.set_src_caps(caps.clone());
+                shown = Some(caps.clone());
+            }
+            if i > 0 {
+                h.push(buffer(face_rgb(), &c, frame_time(i - 1), FRAME))
+                    .unwrap();
+            }
+            mh.push(monitor_frame(colour, &caps, i)).unwrap();
+            if i > 0 {
+                outs.push(to_rgb(&h.pull().unwrap(), &c));
+            }
+        }
+        assert_eq!(
+            stat(&e, "known-source"),
+            6,
+            "every frame had its monitor light"
+        );
+        assert_eq!(stat(&e, "relit"), 6);
+        outs
+    };
+    let changing = run(&|i| {
+        if i < 3 {
+            (RED, rgb.clone())
+        } else {
+            (BLUE, bgrx.clone())
+        }
+    });
+    let blue_from_the_start = run(&|_| (BLUE, bgrx.clone()));
+    let red_throughout = run(&|_| (RED, rgb.clone()));
+    for i in 0..3 {
+        assert!(
+            mean_abs_diff(&changing[i], &red_throughout[i]) < 0.01,
+            "frame {i}: before the change, the red screen's light"
+        );
+    }
+    for i in 3..6 {
+        assert!(
+            mean_abs_diff(&changing[i], &blue_from_the_start[i]) < 0.01,
+            "frame {i}: after the change, the blue BGRx screen's light"
+        );
+        assert!(
+            mean_abs_diff(&changing[i], &red_throughout[i]) > 1.0,
+            "frame {i}: the source light shows in the output"
+        );
+    }
+}
+
 #[test]
 fn target_can_change_while_playing() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
