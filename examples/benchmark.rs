@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo run --release --example benchmark -- [--out results/benchmark] [--quick] [--group skip]
-//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 0] [--model models/default] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --stages [--rounds 3] [--only 1280x720/I420,...] [--threads 2] [--model models/default] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
@@ -424,8 +424,7 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
         name: name.into(),
         group: group.into(),
         model: model.to_path_buf(),
-        // The element's own choice, as shipped.
-        threads: 0,
+        threads: 2,
         properties: vec![],
         recordings: all(&["cuts"]),
         latency_sizes: vec![],
@@ -482,12 +481,12 @@ fn variants(root: &Path, quick: bool) -> Vec<Variant> {
             });
         }
     }
-    // Threads: 2 for the network whatever the denoising beside it needs.
+    // Threads.
     v.push(Variant {
-        threads: 2,
+        threads: 1,
         latency_sizes: vec![(1280, 720)],
         ..with(
-            base("default, 2 threads", "threads", &default),
+            base("default, 1 thread", "threads", &default),
             &[("reuse-interval", "1")],
         )
     });
@@ -570,12 +569,12 @@ fn stages(rounds: usize, only: &[String], threads: u32, model: &Path) -> Result<
         .iter()
         .map(|(gpu, ms)| format!("{ms} ms on {gpu}"))
         .collect();
+    // What the element ran, read back from its `stats`.
     let mut chosen: Vec<u32> = runs.iter().flatten().map(|r| r.network_threads).collect();
     chosen.dedup();
-    let network_threads = match (threads, &chosen[..]) {
-        (0, [n]) => format!("{n} thread(s), the element's choice"),
-        (0, _) => format!("the element's choice of threads ({chosen:?})"),
-        (n, _) => format!("{n} thread(s)"),
+    let network_threads = match &chosen[..] {
+        [n] => format!("{n} thread(s)"),
+        _ => format!("threads {chosen:?}"),
     };
     let mut out = vec![
         format!(
@@ -976,8 +975,8 @@ struct Args {
     /// --stages: cases such as 1280x720/I420; --reuse: recordings and sizes such as steady,1280x720.
     #[arg(long, value_delimiter = ',')]
     only: Vec<String>,
-    /// --stages: the network's threads (0: the element's choice).
-    #[arg(long, default_value_t = 0)]
+    /// --stages: the network's threads.
+    #[arg(long, default_value_t = 2)]
     threads: u32,
     /// --stages: the model folder (default: models/default).
     #[arg(long, requires = "stages")]

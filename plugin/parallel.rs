@@ -2,7 +2,7 @@
 //! use both cores of a small machine on one frame (the denoising beside the
 //! network, the two halves of a frame or of the denoising's areas side by side).
 
-use std::sync::OnceLock;
+use std::sync::{Mutex, OnceLock};
 
 /// The threads `beside` hands work to, started at its first call and kept:
 /// starting a thread for each piece of work cost about 0.1 ms here (`cargo run
@@ -14,30 +14,14 @@ use std::sync::OnceLock;
 fn pool() -> Option<&'static rayon::ThreadPool> {
     static POOL: OnceLock<Option<rayon::ThreadPool>> = OnceLock::new();
     POOL.get_or_init(|| {
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
         rayon::ThreadPoolBuilder::new()
-            .num_threads(cores().min(MOST_THREADS))
+            .num_threads(cores.min(MOST_THREADS))
             .thread_name(|i| format!("lsydrelight-beside-{i}"))
             .build()
             .ok()
     })
     .as_ref()
-}
-
-/// The cores this process may use (2 where the system does not say).
-pub fn cores() -> usize {
-    std::thread::available_parallelism().map_or(2, |n| n.get())
-}
-
-/// The network's threads where the user leaves the choice (`requested` 0):
-/// with the denoising on, one, on the thread that runs the network, so that
-/// the frame's work never runs on more threads than there are cores ([`alongside`]);
-/// without it, the 2 of the earlier default.
-pub fn network_threads(requested: usize, denoising: bool) -> usize {
-    match requested {
-        0 if denoising => 1,
-        0 => 2,
-        n => n,
-    }
 }
 
 /// Most threads the pool keeps: a split is two halves, so a few instances'
@@ -64,78 +48,40 @@ pub fn beside<A: Send, B>(other: impl FnOnce() -> A + Send, here: impl FnOnce() 
     (done.expect("the scope ran the work"), here)
 }
 
-/// Runs `here` on one kept thread of [`pool`] and `other` on another, and
-/// returns both results: for work of milliseconds whose `other` splits its own
-/// work with [`beside`] (the denoising beside the network). Whichever thread is
-/// free takes a half still waiting: the thread that ran `here` takes the
-/// other's second half once `here` is done, so two cores stay busy with no more
-/// threads running than there are (with `here` on one). Where no thread can be
-/// started, both run here in turn. A panic in either carries on in this thread.
-pub fn alongside<A: Send, B: Send>(
+/// [`beside`] on a thread started for `other`: for work of milliseconds
+/// that itself splits (the denoising beside the network). A kept thread that
+/// waits for its own halves keeps looking for work meanwhile, and took time
+/// from the network beside it (`benchmark --stages`, 720p); a thread of its own
+/// sleeps while it waits.
+pub fn beside_long<A: Send, B>(
     other: impl FnOnce() -> A + Send,
-    here: impl FnOnce() -> B + Send,
+    here: impl FnOnce() -> B,
 ) -> (A, B) {
-    let Some(pool) = pool() else {
-        let here = here();
-        return (other(), here);
+    // Held where both threads can reach it, so that a thread that fails to
+    // start leaves the work here to run.
+    let slot = Mutex::new(Some(other));
+    let take = || {
+        slot.lock()
+            .unwrap_or_else(|poisoned| poisoned.into_inner())
+            .take()
     };
-    let (here, other) = pool.install(|| rayon::join(here, other));
-    (other, here)
+    std::thread::scope(|scope| {
+        let spawned = std::thread::Builder::new()
+            .name("lsydrelight-beside".into())
+            .spawn_scoped(scope, || take().map(|work| work()));
+        let here = here();
+        let other = match spawned.map(|thread| thread.join()) {
+            Ok(Ok(Some(done))) => done,
+            Ok(Err(panic)) => std::panic::resume_unwind(panic),
+            Ok(Ok(None)) | Err(_) => take().expect("the work did not run")(),
+        };
+        (other, here)
+    })
 }
 
 #[cfg(test)]
 mod tests {
-    use std::sync::{Barrier, mpsc};
-
-    use super::{MOST_THREADS, alongside, beside, cores, network_threads};
-
-    #[test]
-    fn the_network_runs_on_one_thread_beside_the_denoising_unless_asked_otherwise() {
-        assert_eq!(network_threads(0, true), 1);
-        assert_eq!(network_threads(0, false), 2);
-        assert_eq!(network_threads(3, true), 3);
-        assert_eq!(network_threads(1, false), 1);
-    }
-
-    #[test]
-    fn the_thread_free_first_takes_the_half_still_waiting() {
-        // `here` waits for `other` to start on another kept thread: two are needed.
-        if cores() < 2 {
-            return;
-        }
-        let id = || std::thread::current().id();
-        let started = &Barrier::new(2);
-        let (bottom_ran, bottom_done) = mpsc::channel();
-        let ((bottom, top), here) = alongside(
-            move || {
-                beside(
-                    || {
-                        let me = id();
-                        bottom_ran.send(()).unwrap();
-                        me
-                    },
-                    move || {
-                        started.wait();
-                        // The top half outlasts `here`: it waits for the bottom.
-                        bottom_done.recv().unwrap();
-                        id()
-                    },
-                )
-            },
-            || {
-                started.wait();
-                id()
-            },
-        );
-        assert_ne!(top, here, "`other` ran beside `here`");
-        assert_ne!(bottom, top, "the halves ran side by side");
-        if cores().min(MOST_THREADS) == 2 {
-            assert_eq!(
-                bottom, here,
-                "the thread done with `here` took the waiting half"
-            );
-        }
-    }
+    use super::{beside, beside_long};
 
     #[test]
     fn both_run_and_the_other_on_another_thread() {
@@ -143,9 +89,9 @@ mod tests {
         let (other, mine) = beside(|| std::thread::current().id(), || 7);
         assert_ne!(other, here);
         assert_eq!(mine, 7);
-        let (other, mine) = alongside(|| 8, || std::thread::current().id());
-        assert_eq!(other, 8);
-        assert_ne!(mine, here, "`here` runs on a kept thread too");
+        let (other, mine) = beside_long(|| std::thread::current().id(), || 8);
+        assert_ne!(other, here);
+        assert_eq!(mine, 8);
     }
 
     #[test]
@@ -154,14 +100,14 @@ mod tests {
         let mut right = vec![4, 5];
         beside(|| left.push(0), || right.clear());
         assert_eq!((&left, &right), (&vec![1, 2, 3, 0], &vec![]));
-        alongside(|| left.push(9), || right.push(6));
+        beside_long(|| left.push(9), || right.push(6));
         assert_eq!((left, right), (vec![1, 2, 3, 0, 9], vec![6]));
     }
 
     #[test]
     fn work_split_again_on_the_other_thread_finishes() {
         // The denoising beside the network splits its own areas: both kinds nest.
-        let ((a, b), c) = alongside(|| beside(|| 1, || 2), || beside(|| 3, || 4));
+        let ((a, b), c) = beside_long(|| beside(|| 1, || 2), || beside(|| 3, || 4));
         assert_eq!((a, b, c), (1, 2, (3, 4)));
         let (inner, outer) = beside(|| beside(|| 5, || 6), || 7);
         assert_eq!((inner, outer), ((5, 6), 7));
@@ -173,7 +119,7 @@ mod tests {
             let caught = std::panic::catch_unwind(|| {
                 let other = || -> u8 { panic!("the other half failed") };
                 if long {
-                    alongside(other, || 0).0
+                    beside_long(other, || 0).0
                 } else {
                     beside(other, || 0).0
                 }

@@ -21,7 +21,7 @@
 use std::fmt;
 use std::time::Instant;
 
-use crate::parallel::alongside;
+use crate::parallel::beside_long;
 
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
@@ -523,18 +523,17 @@ impl FramePolicy {
     }
 
     /// [`FramePolicy::finish`], with `meanwhile` run on another thread while
-    /// the network runs: work on the frame that does not need the network's
-    /// result (the denoising), which the other core does instead of waiting,
-    /// and whose waiting halves the network's thread takes when it is done
-    /// ([`alongside`]). Returns the outcome, what `meanwhile` returned and the
-    /// seconds from the network's end to both being done.
+    /// the network runs on this one: work on the frame that does not need
+    /// the network's result (the denoising), which the other core does
+    /// instead of waiting. Returns the outcome, what `meanwhile` returned and
+    /// the seconds this thread then waited for it.
     pub fn finish_while<T: Send>(
         &mut self,
         pending: Pending,
         meanwhile: impl FnOnce() -> T + Send,
     ) -> (Result<Outcome<'_>, EngineError>, T, f64) {
         let (done, (outcome, finished)) =
-            alongside(meanwhile, || (self.finish(pending), Instant::now()));
+            beside_long(meanwhile, || (self.finish(pending), Instant::now()));
         (outcome, done, finished.elapsed().as_secs_f64())
     }
 

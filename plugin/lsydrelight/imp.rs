@@ -36,7 +36,6 @@ use crate::engine::{
 };
 use crate::frame::{DetailDenoiser, FrameCopy, FrameMut};
 use crate::light::Light;
-use crate::parallel;
 use crate::targets::Crossfade;
 
 pub static CAT: LazyLock<gst::DebugCategory> = LazyLock::new(|| {
@@ -811,7 +810,6 @@ impl LsydRelight {
     fn start_engine(
         &self,
         settings: &Settings,
-        network_threads: usize,
     ) -> Result<(FramePolicy, FaceRegion), gst::ErrorMessage> {
         let env = engine::environment(&settings.ort_library)
             .map_err(|e| gst::error_msg!(gst::LibraryError::Init, ["{}", e]))?;
@@ -819,16 +817,21 @@ impl LsydRelight {
             ExecutionProvider::Cpu => Provider::Cpu,
             ExecutionProvider::Cuda => Provider::Cuda,
         };
-        let relighter = Relighter::new(env, &settings.model_location, network_threads, provider)
-            .map_err(|e| match e {
-                engine::EngineError::Provider(_) => {
-                    gst::error_msg!(gst::LibraryError::Init, ["{}", e])
-                }
-                engine::EngineError::Model(engine::ContractError::Missing(_)) => {
-                    gst::error_msg!(gst::ResourceError::NotFound, ["{}", e])
-                }
-                _ => gst::error_msg!(gst::ResourceError::OpenRead, ["{}", e]),
-            })?;
+        let relighter = Relighter::new(
+            env,
+            &settings.model_location,
+            settings.threads as usize,
+            provider,
+        )
+        .map_err(|e| match e {
+            engine::EngineError::Provider(_) => {
+                gst::error_msg!(gst::LibraryError::Init, ["{}", e])
+            }
+            engine::EngineError::Model(engine::ContractError::Missing(_)) => {
+                gst::error_msg!(gst::ResourceError::NotFound, ["{}", e])
+            }
+            _ => gst::error_msg!(gst::ResourceError::OpenRead, ["{}", e]),
+        })?;
         gst::info!(
             CAT,
             imp = self,
@@ -1077,16 +1080,7 @@ impl ElementImpl for LsydRelight {
 impl AggregatorImpl for LsydRelight {
     fn start(&self) -> Result<(), gst::ErrorMessage> {
         let settings = self.settings();
-        let network_threads =
-            parallel::network_threads(settings.threads as usize, settings.denoise);
-        gst::info!(
-            CAT,
-            imp = self,
-            "network on {network_threads} thread(s) ({} asked, denoising {})",
-            settings.threads,
-            settings.denoise
-        );
-        let (mut policy, region) = self.start_engine(&settings, network_threads)?;
+        let (mut policy, region) = self.start_engine(&settings)?;
         let (target, target_generation) =
             TargetSlot::start(&self.target, &settings.target_source()).map_err(|e| {
                 gst::error_msg!(
@@ -1114,7 +1108,7 @@ impl AggregatorImpl for LsydRelight {
             undenoised: FrameCopy::default(),
         });
         *lock(&self.stats) = Stats {
-            network_threads: network_threads as u32,
+            network_threads: settings.threads,
             ..Stats::default()
         };
         lock(&self.monitor).restart();

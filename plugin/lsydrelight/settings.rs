@@ -15,8 +15,7 @@ use crate::monitor_match::MatchSettings;
 use crate::paths;
 use crate::targets::{Preset, View, panorama};
 
-/// 0: the element chooses (`parallel::network_threads`).
-pub const DEFAULT_THREADS: u32 = 0;
+pub const DEFAULT_THREADS: u32 = 2;
 const MAX_MONITOR_OFFSET: i64 = 10_000_000_000;
 const DEFAULT_MONITOR_TIMEOUT: gst::ClockTime = gst::ClockTime::from_seconds(1);
 /// About one frame at 30 fps: relighting a 1080p frame takes 10 ms on an idle 2-core machine,
@@ -278,8 +277,8 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecUInt::builder("threads")
                 .nick("Threads")
-                .blurb("CPU threads of each network stage; 0: chosen when the element starts, 1 with denoise on (the denoising then shares the other core with the network's thread), 2 with it off (the small presence check always runs on one CPU thread)")
-                .minimum(0)
+                .blurb("CPU threads of each network stage (the small presence check always runs on one CPU thread)")
+                .minimum(1)
                 .maximum(64)
                 .default_value(DEFAULT_THREADS)
                 .mutable_ready()

@@ -33,7 +33,7 @@ pub struct Stats {
     pub face_seconds: f64,
     /// Where the rest of a face frame's time goes, stage by stage ([`Stages`]).
     pub stages: Stages,
-    /// The network's threads, as the element chose them (`threads`).
+    /// The network's threads (`threads`), as the element ran them.
     pub network_threads: u32,
     /// The policy's counts as of the last frame; kept after stop, so the last
     /// run's figures stay readable.
