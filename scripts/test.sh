@@ -14,8 +14,8 @@ cargo clippy --workspace --all-targets -- -D warnings
 step "Rust tests"
 cargo build --release -p deskstage
 cargo test --workspace
-step "Live tests at 1080p, 2160p and four 480p calls (optimised build)"
-cargo test --release --test live -- a_1080p four_instances
+step "Live tests at 1080p, 2160p and four 480p calls (optimised build, one at a time: each measures real time on the cores)"
+cargo test --release --test live -- --test-threads 1 a_1080p four_instances
 step "ruff"
 .venv/bin/ruff check train
 .venv/bin/ruff format --check train
