@@ -121,9 +121,6 @@ struct LatencyResult {
     finish_ms: f64,
     #[serde(default)]
     frame_ms: f64,
-    /// The network's threads, as the element chose them.
-    #[serde(default)]
-    network_threads: u32,
 }
 
 #[derive(Debug, Serialize, Deserialize)]
@@ -362,7 +359,6 @@ fn latency(
         setup_ms: per_frame_ms("setup-seconds"),
         finish_ms: per_frame_ms("finish-seconds"),
         frame_ms: per_frame_ms("frame-seconds"),
-        network_threads: stats.get::<u32>("network-threads").unwrap_or(0),
     })
 }
 
@@ -569,17 +565,10 @@ fn stages(rounds: usize, only: &[String], threads: u32, model: &Path) -> Result<
         .iter()
         .map(|(gpu, ms)| format!("{ms} ms on {gpu}"))
         .collect();
-    // What the element ran, read back from its `stats`.
-    let mut chosen: Vec<u32> = runs.iter().flatten().map(|r| r.network_threads).collect();
-    chosen.dedup();
-    let network_threads = match &chosen[..] {
-        [n] => format!("{n} thread(s)"),
-        _ => format!("threads {chosen:?}"),
-    };
     let mut out = vec![
         format!(
             "Per frame, every frame through the network (`{}`), one frame in flight, network on \
-             {network_threads}; median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
+             {threads} thread(s); median (min-max) of {rounds} interleaved rounds of 60 frames (10 more to warm up) \
              on this 2-core CPU. Published anchor, not measured here: NVIDIA Maxine video \
              relighting at 720p, {}.",
             model.strip_prefix(checkout()).unwrap_or(model).display(),

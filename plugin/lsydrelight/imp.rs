@@ -1107,10 +1107,7 @@ impl AggregatorImpl for LsydRelight {
             denoiser: DetailDenoiser::default(),
             undenoised: FrameCopy::default(),
         });
-        *lock(&self.stats) = Stats {
-            network_threads: settings.threads,
-            ..Stats::default()
-        };
+        *lock(&self.stats) = Stats::default();
         lock(&self.monitor).restart();
         lock(&self.target_track).restart();
         self.caps_warned.store(false, Ordering::Relaxed);

@@ -33,8 +33,6 @@ pub struct Stats {
     pub face_seconds: f64,
     /// Where the rest of a face frame's time goes, stage by stage ([`Stages`]).
     pub stages: Stages,
-    /// The network's threads (`threads`), as the element ran them.
-    pub network_threads: u32,
     /// The policy's counts as of the last frame; kept after stop, so the last
     /// run's figures stay readable.
     pub policy: PolicyCounts,
@@ -131,7 +129,6 @@ impl Stats {
             .field("qos-reused", p.reused_late)
             .field("processing-seconds", self.processing_seconds)
             .field("network-seconds", p.network_seconds)
-            .field("network-threads", self.network_threads)
             .field("crop-seconds", p.crop_seconds)
             .field("paste-seconds", self.paste_seconds)
             .field("denoise-seconds", self.denoise_seconds)
