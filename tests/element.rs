@@ -629,6 +629,37 @@ fn an_off_centre_face_is_followed_and_an_empty_frame_passes() {
 /// `stats` names where a frame's time goes: every stage is counted once, within
 /// the element's processing, which is within the frame's whole turn.
 #[test]
+fn a_frame_upstream_still_holds_is_copied_and_left_as_it_was() {
+    let (e, mut h) = face_harness(gst_video::VideoFormat::I420);
+    let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 30);
+    // Held here too, as a `tee` before the element holds it for its other branch.
+    let held = buffer(face_rgb(), &c, frame_time(0), FRAME);
+    let before = to_rgb(&held, &c);
+    h.push(held.clone()).unwrap();
+    let relit = h.pull().unwrap();
+    assert!(
+        mean_abs_diff(&to_rgb(&relit, &c), &before) > 0.5,
+        "the frame is relit"
+    );
+    assert_eq!(
+        mean_abs_diff(&to_rgb(&held, &c), &before),
+        0.0,
+        "the frame upstream holds is not written"
+    );
+    assert_eq!(stat(&e, "frames-copied"), 1);
+    let copy = e
+        .property::<gst::Structure>("stats")
+        .get::<f64>("copy-seconds")
+        .unwrap();
+    assert!(copy > 0.0, "the copy's time is counted");
+    // A frame the element alone holds is written where it is.
+    h.push(buffer(face_rgb(), &c, frame_time(1), FRAME))
+        .unwrap();
+    h.pull().unwrap();
+    assert_eq!(stat(&e, "frames-copied"), 1);
+}
+
+#[test]
 fn stats_account_for_the_time_stage_by_stage() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::I420);
     let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 30);
@@ -653,6 +684,7 @@ fn stats_account_for_the_time_stage_by_stage() {
         "change-seconds",
         "decide-seconds",
         "paste-seconds",
+        "copy-seconds",
         "setup-seconds",
         "finish-seconds",
     ];

@@ -495,6 +495,8 @@ impl LsydRelight {
         // Seconds the frame waited for the denoising and pasting; the
         // denoising's own; with the network, seconds in the policy.
         let (mut paste_seconds, mut denoise_seconds, mut finish_seconds) = (0.0, 0.0, 0.0);
+        // What copying the frame to write it took, where upstream still held it.
+        let mut copied = None;
         let strength = region.strength;
         let mut denoise = |fm: &mut FrameMut| {
             let denoising = Instant::now();
@@ -507,11 +509,8 @@ impl LsydRelight {
             Prepared::Decided(decided) => {
                 let outcome = policy.decided(decided);
                 if let Some(change) = outcome.change {
-                    let mut frame = gst_video::VideoFrameRef::from_buffer_ref_writable(
-                        buffer.make_mut(),
-                        &info,
-                    )
-                    .map_err(|_| gst::FlowError::Error)?;
+                    let (mut frame, copy) = self.map_writable(&mut buffer, &info)?;
+                    copied = copy;
                     // A late frame is to catch up: it costs the paste alone.
                     let late = outcome.action == Action::Reused(Reuse::Late);
                     if late && settings.denoise {
@@ -531,9 +530,8 @@ impl LsydRelight {
                 outcome
             }
             Prepared::Relight(pending) => {
-                let mut frame =
-                    gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), &info)
-                        .map_err(|_| gst::FlowError::Error)?;
+                let (mut frame, copy) = self.map_writable(&mut buffer, &info)?;
+                copied = copy;
                 with_frame_mut(&mut frame, |fm| {
                     let finishing = Instant::now();
                     // The denoising needs the frame and the crop alone: it runs
@@ -581,6 +579,10 @@ impl LsydRelight {
         self.count(|st| {
             st.paste_seconds += paste_seconds;
             st.denoise_seconds += denoise_seconds;
+            if let Some(copy) = copied {
+                st.frames_copied += 1;
+                st.copy_seconds += copy.as_secs_f64();
+            }
         });
         laps.lap();
         let outcome_shows_face = outcome.change.is_some();
@@ -660,6 +662,38 @@ impl LsydRelight {
             self.check_match(time, screen.zip(predicted), fps, settings);
         }
         Ok(buffer)
+    }
+
+    /// Maps the face buffer for writing. Where upstream still holds the buffer
+    /// or its memory (a `tee` before the element, an `appsrc` pushing frames
+    /// it keeps), GStreamer first copies the whole frame, so that the holder's
+    /// stays as it was: a few milliseconds a frame at 2160p, returned here for
+    /// `stats` (`frames-copied`, `copy-seconds`).
+    fn map_writable<'a>(
+        &self,
+        buffer: &'a mut gst::Buffer,
+        info: &gst_video::VideoInfo,
+    ) -> Result<
+        (
+            gst_video::VideoFrameRef<&'a mut gst::BufferRef>,
+            Option<Duration>,
+        ),
+        gst::FlowError,
+    > {
+        let held_upstream = !buffer.is_writable() || !buffer.is_all_memory_writable();
+        let mapping = Instant::now();
+        let frame = gst_video::VideoFrameRef::from_buffer_ref_writable(buffer.make_mut(), info)
+            .map_err(|_| gst::FlowError::Error)?;
+        let copied = held_upstream.then(|| mapping.elapsed());
+        if let Some(copy) = copied {
+            gst::debug!(
+                CAT,
+                imp = self,
+                "the face buffer is still held upstream: copied to be written ({:.2} ms)",
+                copy.as_secs_f64() * 1e3
+            );
+        }
+        Ok((frame, copied))
     }
 
     /// Adds a face frame to the monitor-match check, and posts its message when due.
@@ -1355,6 +1389,9 @@ impl AggregatorImpl for LsydRelight {
         let Some(video_target) = self.video_target(face_rt, timeout, &settings) else {
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
         };
+        // The peeked reference goes first: a buffer held twice is copied to be
+        // written (`map_writable`), a whole frame's copy on every frame.
+        drop(face);
         let buffer = self
             .face_pad
             .pop_buffer()

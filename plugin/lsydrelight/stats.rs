@@ -16,6 +16,10 @@ pub struct Stats {
     pub paste_seconds: f64,
     /// Seconds denoising (`denoise`), beside the network on frames it relit.
     pub denoise_seconds: f64,
+    /// Frames copied to be written because upstream still held them, and the
+    /// seconds the copies took.
+    pub frames_copied: u64,
+    pub copy_seconds: f64,
     pub known_source: u64,
     pub predicted_source: u64,
     pub fallbacks: u64,
@@ -132,6 +136,8 @@ impl Stats {
             .field("crop-seconds", p.crop_seconds)
             .field("paste-seconds", self.paste_seconds)
             .field("denoise-seconds", self.denoise_seconds)
+            .field("frames-copied", self.frames_copied)
+            .field("copy-seconds", self.copy_seconds)
             .field("smoothing-seconds", p.filter_seconds)
             .field("change-seconds", p.change_seconds)
             .field("decide-seconds", decide.max(0.0))
