@@ -39,7 +39,7 @@ const GROWTH_MARGIN_MS: f64 = 20.0;
 const DROPPED_SHARE: f64 = 0.01;
 
 /// The same for a 2160p camera on a 2-core machine, which is at its limit there:
-/// up to 1.3% dropped in the runs that held real time, 88% with QoS broken.
+/// at most 1.3% dropped in the runs measured with QoS working, 88% with it broken.
 const DROPPED_SHARE_AT_LIMIT: f64 = 0.05;
 
 /// The pipeline of README.md's block marked `<!-- tests/live.rs: NAME -->`, as

@@ -540,7 +540,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoxed::builder::<gst::Structure>("stats")
                 .nick("Statistics")
-                .blurb("Frames processed, relit, passed through and skipped (and why), source lights used, monitor fallbacks, resets, work done, and seconds spent: in all, in the network, cropping, pasting, smoothing and reading monitor frames")
+                .blurb("Frames processed, relit, passed through and skipped (and why), source lights used, monitor fallbacks, resets, frames copied because upstream still held them, work done, and seconds spent: in all, in the network, cropping, pasting, copying, smoothing and reading monitor frames")
                 .read_only()
                 .build(),
         ]
