@@ -9,7 +9,8 @@
 # many sessions (the first SESSIONS of train-all.sh's 16, the same frames) if it has none yet.
 # With CUDA the runs train at once, one process each: the networks are small, so one run
 # leaves a GPU mostly idle. On a CPU they train one after another. Each run resumes from its
-# checkpoint if interrupted. PYTHON picks the interpreter (default .venv/bin/python).
+# checkpoint if interrupted. PYTHON picks the interpreter (default .venv/bin/python). TRAIN_FLAGS
+# adds lsyd.train flags to every run alike (say --weight-average 0.995), so the budget stays equal.
 # Score them with lsyd.evaluation.evaluate (README, "The paper's tables"). The runs without light
 # prediction get their light decoder afterwards: lsyd.light_refit --run (README, "Light prediction
 # fitted after training").
@@ -56,9 +57,9 @@ train() {
   [ -f "$runs/$name/done" ] && return
   local resume=()
   [ -f "$runs/$name/checkpoint.pt" ] && resume=(--resume)
-  # shellcheck disable=SC2086 # the variant's flags are words
+  # shellcheck disable=SC2086 # the variant's and TRAIN_FLAGS's flags are words
   (cd train && "$python" -m lsyd.train --data "$data" --out "$runs/$name" --steps "$steps" \
-    --threads 2 --checkpoint-every 1000 ${variant[$name]} "${resume[@]}") >"$runs/$name.log" 2>&1
+    --threads 2 --checkpoint-every 1000 ${variant[$name]} ${TRAIN_FLAGS:-} "${resume[@]}") >"$runs/$name.log" 2>&1
   touch "$runs/$name/done"
 }
 

@@ -237,12 +237,15 @@ def fit_after(run: Path, data_root: Path, out: Path, settings: FitSettings) -> d
         # The network trained without light prediction: no monitor loss, no steps de-lit with
         # a predicted light, whatever the configuration's weights said.
         weights = dataclasses.replace(weights, monitor=0.0, unknown_source=0.0, monitor_colour=0.0)
-    fitted_cfg = dataclasses.replace(cfg, net=net_cfg, weights=weights)
+    # The network fitted on is the run's average where it kept one, and the fitted checkpoint
+    # holds it as its network; the light fit's record says which it was.
+    fitted_cfg = dataclasses.replace(cfg, net=net_cfg, weights=weights, weight_average=0.0)
     (out / "config.json").write_text(json.dumps(fitted_cfg.to_json(), indent=2) + "\n")
     for name in RUN_RECORDS:
         if (run / name).exists():
             shutil.copy2(run / name, out / name)
-    (out / LIGHT_FIT_RECORD).write_text(json.dumps({"run": run.name, **record}, indent=2) + "\n")
+    source = {"run": run.name, "weight_average": cfg.weight_average}
+    (out / LIGHT_FIT_RECORD).write_text(json.dumps(source | record, indent=2) + "\n")
     (out / "done").touch()
     return record
 

@@ -68,6 +68,9 @@ class TrainConfig:
     weights: LossWeights = LossWeights()
     # A saved network (``network.pt``) the generator starts from instead of random weights.
     init: str | None = None
+    # The decay of an exponential moving average of the generator's weights, kept beside them;
+    # the run's trained network is then the average (``load_network``). 0: the last weights.
+    weight_average: float = 0.0
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -84,6 +87,7 @@ class TrainConfig:
             pairing=pairing.PairingRule(**d["pairing"]),
             weights=LossWeights(**d["weights"]),
             init=d.get("init"),
+            weight_average=d.get("weight_average", 0.0),
         )
 
 
@@ -92,13 +96,21 @@ def read_config(run: Path) -> TrainConfig:
     return TrainConfig.from_json(json.loads((run / "config.json").read_text()))
 
 
-def load_network(run: Path, device: str = "cpu") -> tuple[torch.nn.Module, TrainConfig]:
-    """The trained network of a run folder, in evaluation mode."""
+def load_network(run: Path, device: str = "cpu", last_weights: bool = False) -> tuple[torch.nn.Module, TrainConfig]:
+    """The trained network of a run folder, in evaluation mode: the average of its weights
+    where it kept one (``TrainConfig.weight_average``) unless ``last_weights``, else its last
+    weights (the same steps without the average: the average's control)."""
     cfg = read_config(run)
     net = model.build(cfg.net)
     state = torch.load(run / "checkpoint.pt", map_location=device, weights_only=False)
-    net.load_state_dict(state["net"])
+    averaged = cfg.weight_average > 0 and not last_weights
+    net.load_state_dict(averaged_weights(state["average"]) if averaged else state["net"])
     return net.eval(), cfg
+
+
+def averaged_weights(average: dict) -> dict:
+    """The network's weights out of a ``torch.optim.swa_utils.AveragedModel``'s state."""
+    return {k.removeprefix("module."): v for k, v in average.items() if k != "n_averaged"}
 
 
 def hardware(device: torch.device) -> str:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
+from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
 from . import data, losses, model, pairing
@@ -75,6 +76,13 @@ class Trainer:
         self.disc = losses.PatchDiscriminator().to(device, memory_format=torch.channels_last)
         self.opt_g = torch.optim.Adam(self.net.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
         self.opt_d = torch.optim.Adam(self.disc.parameters(), lr=cfg.lr, betas=(0.5, 0.999))
+        # The weights' moving average smooths the last steps' noise out of the kept network;
+        # training itself goes on with the last weights.
+        self.average = (
+            AveragedModel(self.net, multi_avg_fn=get_ema_multi_avg_fn(cfg.weight_average), use_buffers=True)
+            if cfg.weight_average
+            else None
+        )
         self.step = 0
         self.sampler = torch.Generator().manual_seed(cfg.seed + 1)
 
@@ -127,6 +135,8 @@ class Trainer:
         self.opt_g.zero_grad(set_to_none=True)
         g_loss.backward()
         self.opt_g.step()
+        if self.average is not None:
+            self.average.update_parameters(self.net)
         self.step += 1
         return {"g": g_loss.item(), "d": d_loss.item(), **{k: v.item() for k, v in terms.items()}}
 
@@ -139,7 +149,7 @@ class Trainer:
             "opt_d": self.opt_d.state_dict(),
             "sampler": self.sampler.get_state(),
             "torch_rng": torch.get_rng_state(),
-        }
+        } | ({"average": self.average.state_dict()} if self.average is not None else {})
 
     def save(self) -> None:
         tmp = self.run / "checkpoint.pt.tmp"
@@ -152,6 +162,8 @@ class Trainer:
         self.disc.load_state_dict(s["disc"])
         self.opt_g.load_state_dict(s["opt_g"])
         self.opt_d.load_state_dict(s["opt_d"])
+        if self.average is not None:
+            self.average.load_state_dict(s["average"])
         self.sampler.set_state(s["sampler"])
         torch.set_rng_state(s["torch_rng"])
         self.step = s["step"]
@@ -294,6 +306,12 @@ def main() -> None:
     p.add_argument("--batch", type=int, default=TrainConfig.batch)
     p.add_argument("--lr", type=float, default=TrainConfig.lr)
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--weight-average",
+        type=float,
+        default=TrainConfig.weight_average,
+        help="keep an exponential moving average of the weights with this decay and use it (0: the last weights)",
+    )
     p.add_argument("--pairs", default="keypoints", choices=["keypoints", "exact", "both"])
     p.add_argument("--max-keypoint-distance", type=float, default=pairing.PairingRule.max_keypoint_distance)
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
@@ -327,6 +345,7 @@ def main() -> None:
         pairing=pairing.PairingRule(max_keypoint_distance=a.max_keypoint_distance),
         weights=LossWeights(delit_consistency=a.delit_consistency, monitor_colour=a.monitor_colour),
         init=str(a.init.resolve()) if a.init else None,
+        weight_average=a.weight_average,
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
     train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)

@@ -1,6 +1,8 @@
 """The trained network: de-lighting removes source light; training is reproducible
 and resumable; export matches PyTorch and loads in ONNX Runtime."""
 
+import dataclasses
+
 import numpy as np
 import torch
 
@@ -54,3 +56,30 @@ def test_training_smoke_resume_and_export(sim_data, tmp_path):
         s = contract.open_session(tmp_path / "model" / spec["file"])
         assert [i.name for i in s.get_inputs()] == [t["name"] for t in spec["inputs"]], name
         assert [o.name for o in s.get_outputs()] == [t["name"] for t in spec["outputs"]], name
+
+
+def test_the_weights_average_is_kept_resumed_and_is_the_runs_network(sim_data, tmp_path):
+    """With ``weight_average`` the run's network is the exponential moving average of the
+    weights after each step, resumed from checkpoints as if never stopped."""
+    torch.set_num_threads(2)
+    decay = 0.6
+    cfg = dataclasses.replace(tiny_config(3), weight_average=decay)
+    run = tmp_path / "averaged"
+    last_weights = []
+    for step in (1, 2, 3):
+        train.train(cfg, sim_data, run, resume=step > 1, checkpoint_every=1, device=torch.device("cpu"), stop_at=step)
+        last_weights.append(torch.load(run / "checkpoint.pt", weights_only=False)["net"])
+    net, _ = runs.load_network(run)
+    kept = net.state_dict()
+    for k, first in last_weights[0].items():
+        if not first.is_floating_point():
+            continue
+        expected = first.clone()
+        for weights in last_weights[1:]:
+            expected = decay * expected + (1 - decay) * weights[k]
+        assert torch.allclose(kept[k], expected, atol=1e-6), k
+    # The average is not the last weights, which stay readable as its control.
+    assert any(not torch.equal(kept[k], v) for k, v in last_weights[-1].items() if v.is_floating_point())
+    last, _ = runs.load_network(run, last_weights=True)
+    for k, v in last.state_dict().items():
+        assert torch.equal(v, last_weights[-1][k]), k
