@@ -80,7 +80,7 @@ class Trainer:
         # training itself goes on with the last weights.
         self.average = (
             AveragedModel(self.net, multi_avg_fn=get_ema_multi_avg_fn(cfg.weight_average), use_buffers=True)
-            if cfg.weight_average
+            if cfg.weight_average > 0
             else None
         )
         self.step = 0
