@@ -11,11 +11,20 @@ ROOT = Path(__file__).resolve().parents[2]
 DATA = ROOT / "target" / "test-data"
 
 
-def deskstage(*args: str) -> None:
-    binary = ROOT / "target" / "release" / "deskstage"
+def release_binary(package: str, name: str) -> Path:
+    """A program of the workspace as scripts/test.sh's one optimised build leaves it; built if missing."""
+    binary = ROOT / "target" / "release" / name
     if not binary.exists():
-        subprocess.run(["cargo", "build", "--release", "-p", "deskstage"], cwd=ROOT, check=True)
-    subprocess.run([str(binary), *args], cwd=ROOT, check=True)
+        subprocess.run(["cargo", "build", "--release", "-p", package], cwd=ROOT, check=True)
+    return binary
+
+
+def lsydrelight() -> Path:
+    return release_binary("lsydrelight-cli", "lsydrelight")
+
+
+def deskstage(*args: str) -> None:
+    subprocess.run([str(release_binary("deskstage", "deskstage")), *args], cwd=ROOT, check=True)
 
 
 @pytest.fixture(scope="session")

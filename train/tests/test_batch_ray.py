@@ -9,16 +9,9 @@ import subprocess
 import sys
 from pathlib import Path
 
-from conftest import ROOT
+from conftest import ROOT, lsydrelight
 
 FRAMES = 12
-
-
-def lsydrelight() -> Path:
-    binary = ROOT / "target" / "debug" / "lsydrelight"
-    if not binary.exists():
-        subprocess.run(["cargo", "build", "-p", "lsydrelight-cli"], cwd=ROOT, check=True)
-    return binary
 
 
 def tiny_recording(path: Path, muxer: str) -> None:

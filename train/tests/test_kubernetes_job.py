@@ -10,7 +10,7 @@ import subprocess
 from pathlib import Path
 
 import yaml
-from conftest import ROOT
+from conftest import ROOT, lsydrelight
 
 DEPLOY = ROOT / "deploy" / "kubernetes"
 OPT = "/opt/lsydrelight"
@@ -60,13 +60,6 @@ def test_the_job_runs_one_pod_per_listed_recording_and_fails_bad_ones_without_re
     for name, path in env.items():
         if path.startswith("/calls"):
             assert any(path.startswith(m) for m in mounts.values()), f"{name} {path} is on no volume"
-
-
-def lsydrelight() -> Path:
-    binary = ROOT / "target" / "debug" / "lsydrelight"
-    if not binary.exists():
-        subprocess.run(["cargo", "build", "-p", "lsydrelight-cli"], cwd=ROOT, check=True)
-    return binary
 
 
 def tiny_recording(path: Path) -> None:
