@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # The main job on the shipped defaults: relights the shipped synthetic recorded call
-# (examples/data/call) with the default model through `lsydrelight relight`, which keeps
-# audio and every other stream, and writes the relit video, the predicted-monitor video
-# and a side-by-side image of one frame to results/demo. Also builds the plugin into
-# target/release, where `GST_PLUGIN_PATH=$PWD/target/release` finds it.
+# (examples/data/call) with its person's own model, models/default, through
+# `lsydrelight relight`, which keeps audio and every other stream, and writes the relit
+# video, the predicted-monitor video and a side-by-side image of one frame to results/demo.
+# Also builds the plugin into target/release, where `GST_PLUGIN_PATH=$PWD/target/release`
+# finds it.
 #
 #   scripts/demo.sh [--face FILE] [--monitor FILE] [--target PNG] [--model DIR] [--out DIR] [--frame N]
 set -euo pipefail
