@@ -71,4 +71,7 @@ for name in "${names[@]}"; do
   fi
 done
 wait
-grep -h "^trained" "$runs"/*.log
+# The runs' own logs only: another log in the folder (say, this script's output) is not theirs.
+for name in "${names[@]}"; do
+  grep -h "^trained" "$runs/$name.log"
+done
