@@ -9,6 +9,7 @@ import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
+from lsyd.evaluation import evaluate
 
 COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds")
 
@@ -38,29 +39,23 @@ def _record(path, rows):
     return path
 
 
+def _four_rows(sun, sengupta, ours_given, ours_predicted):
+    """Table 1's four rows, each (RMSE, FLIP)."""
+    return {
+        evaluate.SUN_ROW: sun,
+        evaluate.SENGUPTA_ROW: sengupta,
+        evaluate.OURS_GIVEN_ROW: ours_given,
+        evaluate.OURS_PREDICTED_ROW: ours_predicted,
+    }
+
+
 def test_seeds_reads_split_records_and_gives_the_margin_of_the_means(tmp_path):
-    baselines = _record(
-        tmp_path / "paper.json",
-        {
-            "Sun et al. 2019 (source predicted)": (12.0, 0.16),
-            "Sengupta et al. 2021 (source given)": (10.0, 0.15),
-            # A jointly trained row, replaced by the fitted run's below.
-            "Ours, source given": (9.9, 0.14),
-            "Ours, source predicted": (11.0, 0.15),
-        },
-    )
+    # Seed 0's jointly trained rows of ours, replaced by the fitted run's below.
+    baselines = _record(tmp_path / "paper.json", _four_rows((12.0, 0.16), (10.0, 0.15), (9.9, 0.14), (11.0, 0.15)))
     fitted = _record(
         tmp_path / "fitted.json", {"Ours, source given": (8.0, 0.12), "Ours, source predicted": (9.0, 0.12)}
     )
-    other = _record(
-        tmp_path / "seed-1.json",
-        {
-            "Sun et al. 2019 (source predicted)": (12.0, 0.16),
-            "Sengupta et al. 2021 (source given)": (12.0, 0.15),
-            "Ours, source given": (8.0, 0.09),
-            "Ours, source predicted": (9.0, 0.12),
-        },
-    )
+    other = _record(tmp_path / "seed-1.json", _four_rows((12.0, 0.16), (12.0, 0.15), (8.0, 0.09), (9.0, 0.12)))
     out = python("-m", "lsyd.evaluation.seeds", f"0={baselines},{fitted}", f"1={other}")
     given_rmse = next(line for line in out.splitlines() if "Sengupta" in line and "| RMSE |" in line)
     # Seed 0: 8 against 10 (20%, the fitted row, not the joint one); seed 1: 8 against 12 (33.3%);

@@ -36,6 +36,12 @@ from .. import data
 from ..runs import load_network
 from . import metrics
 
+# Table 1's rows, as its records name them (`lsyd.evaluation.seeds` reads them back).
+SUN_ROW = "Sun et al. 2019 (source predicted)"
+OURS_PREDICTED_ROW = "Ours, source predicted"
+SENGUPTA_ROW = "Sengupta et al. 2021 (source given)"
+OURS_GIVEN_ROW = "Ours, source given"
+
 TABLE2_RECORDINGS = ("steady", "slow", "cuts")
 
 
@@ -158,14 +164,14 @@ def main() -> None:
 
     ours_known = held_row("ours", True)
     if "sun" in nets:
-        results["table1"]["Sun et al. 2019 (source predicted)"] = held_row("sun", True)
+        results["table1"][SUN_ROW] = held_row("sun", True)
     if nets["ours"][1].net.light_prediction:
-        results["table1"]["Ours, source predicted"] = held_row("ours", False)
+        results["table1"][OURS_PREDICTED_ROW] = held_row("ours", False)
     else:
         print("ours has no light decoder: the predicted-source row is left out (lsyd.light_refit --run fits one)")
     if "sengupta" in nets:
-        results["table1"]["Sengupta et al. 2021 (source given)"] = held_row("sengupta", True)
-    results["table1"]["Ours, source given"] = ours_known
+        results["table1"][SENGUPTA_ROW] = held_row("sengupta", True)
+    results["table1"][OURS_GIVEN_ROW] = ours_known
     if "neither" in nets:
         results["table3"]["no prediction, no de-lighting"] = held_row("neither", True)
     if "no-delight" in nets:

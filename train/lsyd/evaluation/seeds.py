@@ -22,10 +22,12 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-# (cell, ours' row, the baseline's row) as Table 1 names them.
+from . import evaluate
+
+# (cell, ours' row, the baseline's row).
 CELLS = (
-    ("source given, against Sengupta et al.", "Ours, source given", "Sengupta et al. 2021 (source given)"),
-    ("source predicted, against Sun et al.", "Ours, source predicted", "Sun et al. 2019 (source predicted)"),
+    ("source given, against Sengupta et al.", evaluate.OURS_GIVEN_ROW, evaluate.SENGUPTA_ROW),
+    ("source predicted, against Sun et al.", evaluate.OURS_PREDICTED_ROW, evaluate.SUN_ROW),
 )
 METRICS = (("RMSE", "rmse", 3), ("FLIP", "flip", 4))
 
