@@ -11,7 +11,7 @@ from conftest import ROOT
 from lsyd import evaluation
 from lsyd.evaluation import evaluate
 
-COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds")
+COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound")
 
 
 def python(*args: str) -> str:
