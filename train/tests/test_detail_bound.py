@@ -71,3 +71,9 @@ def test_guided_upsampling_recovers_shading_that_follows_the_input_luma():
     bilinear = detail_bound.bands(detail_bound.apply(face, detail_bound.upsample(change, SIDE)), truth, RADIUS)
     guided = detail_bound.bands(detail_bound.apply(face, detail_bound.guided_upsample(change, face)), truth, RADIUS)
     assert guided[1] < 0.5 * bilinear[1]
+
+
+def test_a_missing_recording_says_which_command_writes_it(tmp_path, monkeypatch):
+    monkeypatch.setattr("sys.argv", ["detail_bound", "--recording", str(tmp_path / "call-90")])
+    with pytest.raises(SystemExit, match="example flicker -- --recordings call --frames 90 --clean"):
+        detail_bound.main()

@@ -175,7 +175,12 @@ def main() -> None:
                 "target/recordings/call-90 and target/clean-faces/call-90.y4m"
             )
     face = centre_square(read_y4m(face_path)[0][: a.frames])
-    resolutions = [int(r) for r in a.resolutions.split(",")]
+    try:
+        resolutions = [int(r) for r in a.resolutions.split(",")]
+    except ValueError:
+        raise SystemExit(f"--resolutions {a.resolutions}: expected whole numbers, such as 48,96,192") from None
+    if not all(1 <= r <= face.shape[1] for r in resolutions):
+        raise SystemExit(f"--resolutions {a.resolutions}: each must be 1 to the face region's {face.shape[1]} px")
     per_target = {}
     for target in a.targets.split(","):
         truth = centre_square(read_y4m(a.recording / f"truth-{target}.y4m")[0][: len(face)])
