@@ -5,6 +5,8 @@
 - ``compare``: runs side by side on the validation set, de-lighting included;
 - ``benchmark``: the model side of the run-time against error benchmark, and its report;
 - ``modelcard``: a model's held-out figures, and its card;
+- ``seeds``: issue 16's four cells over several seeds, from ``evaluate``'s records;
+- ``detail_bound``: how much of the detail band a change at a given resolution can remove;
 - ``metrics``: the image and temporal metrics they share, and the one loop that scores
   a network on a 9 x 9 test set.
 
@@ -16,3 +18,11 @@ from pathlib import Path
 
 # The repository's root: the commands' default paths are under it.
 ROOT = Path(__file__).resolve().parents[3]
+
+
+def report(text: str, out: Path | None) -> None:
+    """Prints a command's markdown report and, with ``out``, writes it there too."""
+    print(text, end="")
+    if out:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)

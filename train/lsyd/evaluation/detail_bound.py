@@ -36,6 +36,7 @@ import torch
 import torch.nn.functional as F
 
 from ..data import area_resize, read_y4m
+from . import report
 
 # As `DETAIL_RADIUS_FRACTION` in tests/support/src/recording.rs.
 DETAIL_RADIUS_FRACTION = 1.0 / 48.0
@@ -199,11 +200,7 @@ def main() -> None:
         cells = [per_target[t][i] for t in targets]
         mean_detail = sum(c[2] for c in cells) / len(cells)
         lines.append(f"| {what} | " + " | ".join(f"{c[1]:.3f} / {c[2]:.3f}" for c in cells) + f" | {mean_detail:.3f} |")
-    table = "\n".join(lines) + "\n"
-    print(table, end="")
-    if a.out:
-        a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text(table)
+    report("\n".join(lines) + "\n", a.out)
 
 
 if __name__ == "__main__":

@@ -22,7 +22,7 @@ import statistics
 from dataclasses import dataclass
 from pathlib import Path
 
-from . import evaluate
+from . import evaluate, report
 
 # (cell, ours' row, the baseline's row).
 CELLS = (
@@ -89,11 +89,7 @@ def main() -> None:
     p.add_argument("seed", nargs="+", help="LABEL=FILE[,FILE...]: a seed's held-out records")
     p.add_argument("--out", type=Path, help="also write the table to this markdown file")
     args = p.parse_args()
-    text = table([read_seed(a) for a in args.seed])
-    print(text, end="")
-    if args.out:
-        args.out.parent.mkdir(parents=True, exist_ok=True)
-        args.out.write_text(text)
+    report(table([read_seed(a) for a in args.seed]), args.out)
 
 
 if __name__ == "__main__":
