@@ -75,5 +75,5 @@ def test_guided_upsampling_recovers_shading_that_follows_the_input_luma():
 
 def test_a_missing_recording_says_which_command_writes_it(tmp_path, monkeypatch):
     monkeypatch.setattr("sys.argv", ["detail_bound", "--recording", str(tmp_path / "call-90")])
-    with pytest.raises(SystemExit, match="example flicker -- --recordings call --frames 90 --clean"):
+    with pytest.raises(SystemExit, match="example flicker -- --recordings NAME --frames N --clean"):
         detail_bound.main()

@@ -172,8 +172,8 @@ def main() -> None:
     for path in (face_path, *(a.recording / f"truth-{t}.y4m" for t in a.targets.split(","))):
         if not path.is_file():
             raise SystemExit(
-                f"no {path}: `cargo run --release --example flicker -- --recordings call --frames 90 --clean` writes "
-                "target/recordings/call-90 and target/clean-faces/call-90.y4m"
+                f"no {path}: `cargo run --release --example flicker -- --recordings NAME --frames N --clean` writes "
+                "target/recordings/NAME-N and target/clean-faces/NAME-N.y4m"
             )
     face = centre_square(read_y4m(face_path)[0][: a.frames])
     try:
