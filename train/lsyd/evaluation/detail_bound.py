@@ -35,7 +35,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from ..data import area_resize, read_y4m
+from ..data import area_resize, centre_square, read_y4m
 from . import report
 
 # As `DETAIL_RADIUS_FRACTION` in tests/support/src/recording.rs.
@@ -128,14 +128,6 @@ def bands(outputs, truth: np.ndarray, radius: int) -> tuple[float, float]:
     for out, t in zip(outputs, truth, strict=True):
         sums += band_sums(out, t, radius)
     return math.sqrt(sums[0] / sums[2]), math.sqrt(sums[1] / sums[2])
-
-
-def centre_square(frames: np.ndarray) -> np.ndarray:
-    """The frames' centred square, the scorer's face region."""
-    h, w = frames.shape[1:3]
-    side = min(h, w)
-    y, x = (h - side) // 2, (w - side) // 2
-    return frames[:, y : y + side, x : x + side]
 
 
 Row = tuple[str, float, float]
