@@ -2,6 +2,12 @@
 //! (screen, predicted) light pairs, and the element message that reports its
 //! score about once a second. The scoring is [`crate::monitor_match`]'s.
 
+use gst::prelude::*;
+use gst::subclass::prelude::*;
+
+use super::imp::{CAT, LsydRelight};
+use super::lock;
+use super::settings::Settings;
 use crate::light::Light;
 use crate::monitor_match::{MatchScore, MatchSettings, MatchWindow};
 
@@ -75,4 +81,40 @@ pub fn message_structure(
         }
     }
     s
+}
+
+impl LsydRelight {
+    /// Adds a face frame to the monitor-match check, and posts its message when due.
+    pub(super) fn check_match(
+        &self,
+        time: f64,
+        pair: Option<(Light, Light)>,
+        fps: f64,
+        settings: &Settings,
+    ) {
+        let pair = pair.as_ref().map(|(screen, predicted)| (screen, predicted));
+        let Some(score) = lock(&self.match_check).frame(time, pair, &settings.matching, fps) else {
+            return;
+        };
+        gst::debug!(
+            CAT,
+            imp = self,
+            "monitor match at {time:.2} s: {} over {} frames, score {:?}, components {:?}",
+            score.verdict.name(),
+            score.frames,
+            score.score,
+            score.components
+        );
+        let structure = message_structure(
+            &score,
+            &settings.matching,
+            gst::ClockTime::from_seconds_f64(time),
+        );
+        let element = self.obj();
+        let _ = element.post_message(
+            gst::message::Element::builder(structure)
+                .src(&*element)
+                .build(),
+        );
+    }
 }

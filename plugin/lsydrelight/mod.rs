@@ -86,12 +86,15 @@ use gst::glib;
 use gst::prelude::*;
 
 mod imp;
+mod lights;
 mod match_check;
 mod monitor;
+mod process;
 mod qos;
 mod region;
 mod settings;
 mod side_stream;
+mod state;
 mod stats;
 mod target;
 pub mod video;

@@ -7,12 +7,16 @@
 //! of the slower branch); a live one drops the oldest frame and says so once.
 
 use std::collections::VecDeque;
+use std::sync::atomic::Ordering;
 use std::sync::{Condvar, Mutex, MutexGuard};
 use std::time::Duration;
 
 use gst::glib;
 use gst::prelude::*;
+use gst::subclass::prelude::*;
+use gst_base::prelude::*;
 
+use super::imp::{CAT, LsydRelight};
 use crate::light::{LIGHT_COLS, LIGHT_ROWS, Light};
 
 /// Size of the predicted-monitor video: each light cell becomes 8×8 pixels.
@@ -289,5 +293,63 @@ impl SideStream {
                 let _ = task_pad.pause_task();
             }
         })
+    }
+}
+
+impl LsydRelight {
+    /// Queues the predicted light (or a gap) for `monitor_src` at the face frame's time.
+    pub(super) fn show_prediction(&self, light: Option<&Light>, face: &gst::Buffer) {
+        self.side.start(&self.face_pad.segment());
+        // A non-live pipeline waits for a slow side branch rather than lose its frames.
+        let wait = !self.qos.is_live();
+        let queued = self
+            .side
+            .push_frame(light, face.pts(), face.duration(), wait);
+        if light.is_some() {
+            self.count(|st| {
+                st.monitor_out += 1;
+                if queued == Queued::DroppedOldest {
+                    st.monitor_dropped += 1;
+                }
+            });
+        }
+        if queued == Queued::DroppedOldest {
+            gst::debug!(
+                CAT,
+                imp = self,
+                "monitor_src is behind: dropped its oldest frame"
+            );
+            if !self.side_drop_warned.swap(true, Ordering::Relaxed) {
+                gst::element_imp_warning!(
+                    self,
+                    gst::StreamError::Failed,
+                    ("monitor_src falls behind the live face stream: dropping its oldest frames"),
+                    [
+                        "The branch after monitor_src consumes slower than the face frame rate; give it a leaky queue or a faster sink. stats' monitor-dropped counts them."
+                    ]
+                );
+            }
+        }
+    }
+
+    /// Sends a gap on the face stream downstream, and to `monitor_src`. Before the
+    /// first frame (or after a flush) downstream has no segment yet, and a gap may
+    /// not precede it: that gap is dropped.
+    pub(super) fn forward_gap(&self, gap: &gst::Buffer) {
+        let src = self.obj().src_pad().clone();
+        if let Some(pts) = gap.pts()
+            && src.sticky_event::<gst::event::Segment>(0).is_some()
+        {
+            let event = || {
+                gst::event::Gap::builder(pts)
+                    .duration(gap.duration())
+                    .build()
+            };
+            gst::debug!(CAT, imp = self, "gap at {pts} passed on");
+            src.push_event(event());
+            if self.monitor_src.is_linked() {
+                self.side.push_event(event());
+            }
+        }
     }
 }

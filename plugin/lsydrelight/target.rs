@@ -10,6 +10,10 @@ use super::lock;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
+use gst::glib;
+use gst::subclass::prelude::*;
+
+use super::imp::{CAT, LsydRelight};
 use crate::light::Light;
 use crate::targets::{Panorama, Preset, View};
 
@@ -133,5 +137,35 @@ impl TargetSlot {
         (self.generation != generation)
             .then(|| self.decoded.clone().map(|l| (l, self.generation)))
             .flatten()
+    }
+}
+
+impl LsydRelight {
+    /// Sets a target property and resolves the target it names here, on the
+    /// caller's thread (GstController's: the streaming thread).
+    pub(super) fn set_target(&self, name: &str, value: &glib::Value) {
+        let source = {
+            let mut settings = lock(&self.settings);
+            settings.set(name, value);
+            settings.target_source()
+        };
+        let decoded = TargetSlot::resolve(&self.target, &source);
+        let update = lock(&self.target).update(decoded);
+        match update {
+            Update::Applied => gst::debug!(CAT, imp = self, "{name}: target {source}"),
+            Update::Deferred => gst::debug!(
+                CAT,
+                imp = self,
+                "target {source} cannot be read; the error surfaces at start"
+            ),
+            Update::KeptPrevious(e) => gst::element_imp_warning!(
+                self,
+                gst::ResourceError::OpenRead,
+                ("Keeping the previous target light: {}", e),
+                [
+                    "Set target-location to a readable PNG image of monitor content, target-environment to a readable panorama, or target-preset to a preset."
+                ]
+            ),
+        }
     }
 }

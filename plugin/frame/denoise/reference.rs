@@ -3,10 +3,11 @@
 //! one must give the same bytes and the same filtered detail.
 
 use super::super::{FrameMut, round_to_u8};
-use super::{
-    BANDS, DITHER_ROWS, Disc, MOTION_RADIUS, NO_DETAIL, NOISE_SAMPLES, PlaneView, SPLIT_RADIUS,
-    band, new_share, per_band, restored, sample_positions, stored,
-};
+use super::channel::{NO_DETAIL, restored, stored};
+use super::disc::Disc;
+use super::motion::{band, new_share, per_band};
+use super::walk::{DITHER_ROWS, PlaneView, sample_positions};
+use super::{BANDS, MOTION_RADIUS, NOISE_SAMPLES, SPLIT_RADIUS};
 
 /// What the plain denoiser keeps of one channel (`ChannelState`).
 #[derive(Default)]

@@ -1,4 +1,13 @@
+//! The denoiser's tests: noise and flicker taken out of a still face, no trail
+//! behind a moving one, nothing changed beyond the fade, and the fast walk
+//! held to the plain one's bytes in every format and build.
+
+use super::motion::new_share;
+#[cfg(target_arch = "x86_64")]
+use super::motion::{over_noise_avx2, over_noise_plain};
+use super::walk::EDGE_ROWS;
 use super::*;
+use crate::frame::gain_field::INNER_RADIUS;
 use crate::frame::{OwnedFrame, YuvMatrix};
 
 /// Normal noise from a fixed seed: a xorshift generator and Box-Muller.
