@@ -13,7 +13,7 @@ step "cargo clippy"
 cargo clippy --workspace --all-targets -- -D warnings
 # One optimised build for every Rust test: the live tests measure real time and need
 # it, the Python tests use its simulator and CLI, and a second, unoptimised build of the same
-# crates cost CI about eight minutes more (README, "Tests and CI time"). The live
+# crates cost CI about eight minutes more (docs/reliability.md). The live
 # tests take their turns by a lock of their own.
 step "Rust tests, optimised (the simulator, engine, element, end to end, and live at 1080p, 2160p and four 480p calls)"
 cargo test --release --workspace

@@ -11,8 +11,8 @@
 # leaves a GPU mostly idle. On a CPU they train one after another. Each run resumes from its
 # checkpoint if interrupted. PYTHON picks the interpreter (default .venv/bin/python). TRAIN_FLAGS
 # adds lsyd.train flags to every run alike (say --weight-average 0.995), so the budget stays equal.
-# Score them with lsyd.evaluation.evaluate (README, "The paper's tables"). The runs without light
-# prediction get their light decoder afterwards: lsyd.light_refit --run (README, "Light prediction
+# Score them with lsyd.evaluation.evaluate (docs/accuracy.md, "The paper's tables"). The runs without light
+# prediction get their light decoder afterwards: lsyd.light_refit --run (docs/accuracy.md, "The light decoder
 # fitted after training").
 set -euo pipefail
 cd "$(dirname "$0")/.."

@@ -666,7 +666,7 @@ fn live_seconds() -> u64 {
 /// share but does not assert it, and may drop up to 5% rather than 1%: on two
 /// cores without AVX-512 a 2160p frame round a close face takes about 33 ms, its
 /// whole period, so the share in time is that machine's speed, whose parts the
-/// benchmark's stage table measures (README, "Live: calls and OBS"); what must
+/// benchmark's stage table measures (docs/live.md); what must
 /// hold there is that QoS keeps the stream in real time, not falling behind. The 1080p run's screen is full HD; the 2160p
 /// run's a small one, as its margin on a 2-core machine does not cover a
 /// full-HD screen's light.

@@ -67,7 +67,7 @@ pub struct Skips {
 }
 
 impl Default for Skips {
-    // From the benchmark's skip table (README, "Skipping what a scene does not need"):
+    // From the benchmark's skip table (docs/benchmark.md, "Skipping what a scene does not need"):
     // each skip is on where it pays.
     fn default() -> Self {
         Skips {
@@ -426,7 +426,7 @@ impl FramePolicy {
         if self.skips.skip_absent && self.relighter.has_presence() {
             // From the network's crop, not the frame: one pass over the face
             // region feeds both. (The shipped classifier's decisions are the
-            // same either way: README, "Skipping what a scene does not need".)
+            // same either way: docs/benchmark.md, "Skipping what a scene does not need".)
             let small = timed(&mut self.counts.crop_seconds, || {
                 resample_square(&image, res, PRESENCE_SIZE)
             });

@@ -5,7 +5,7 @@
 //! and with it the camera's noise: where the change brightens, the noise grows
 //! with it, and it differs from frame to frame where the relit truth has none.
 //! On the simulator's recordings that noise is nearly all of the element's
-//! flicker (README, "Flicker and the source light's detail").
+//! flicker (docs/flicker.md).
 //!
 //! Each plane is split into a smooth band (a box blur of [`SPLIT_RADIUS`]) and
 //! its detail. The smooth band passes as it is, so a change of the screen's

@@ -260,7 +260,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
         vec![
             glib::ParamSpecString::builder("model-location")
                 .nick("Model")
-                .blurb("Folder of the personalised model (model.json and its ONNX stages); the default, models/starter, is trained on many people; `lsydrelight train` makes your own; models/starter-int8 and models/default-int8 are int8 variants: a faster network for a little more error (README)")
+                .blurb("Folder of the personalised model (model.json and its ONNX stages); the default, models/starter, is trained on many people; `lsydrelight train` makes your own; models/starter-int8 and models/default-int8 are int8 variants: a faster network for a little more error (docs/benchmark.md)")
                 .default_value(Some(path(&d.model_location).as_str()))
                 .mutable_ready()
                 .build(),

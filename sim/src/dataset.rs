@@ -16,7 +16,6 @@ use std::fs;
 use std::io;
 use std::path::Path;
 
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::content::{self, Clip, FRAME_HEIGHT, FRAME_WIDTH, Playlist, Style};
@@ -79,7 +78,7 @@ pub fn keypoints(r: &Renderer, state: &State) -> Vec<[f32; 2]> {
 }
 
 /// Still frames of clips and their cell lights.
-fn still_lights(r: &Renderer, clips: &[Clip]) -> (Vec<RgbImage>, Vec<CellLight>) {
+pub(crate) fn still_lights(r: &Renderer, clips: &[Clip]) -> (Vec<RgbImage>, Vec<CellLight>) {
     let shown: Vec<RgbImage> = clips
         .iter()
         .map(|c| Playlist::still(c.clone()).frame(0.0))
@@ -794,85 +793,4 @@ impl Recording {
             }),
         )
     }
-}
-
-/// The person under a grid of monitor lights (columns) and poses (rows), for people to look at.
-pub fn contact_sheet(subject_seed: u64, cell: usize) -> Result<RgbImage, String> {
-    let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), cell, cell))?;
-    let mut clips: Vec<Clip> = content::heldout_clips(subject_seed);
-    clips.truncate(6);
-    let (shown, cells) = still_lights(&r, &clips);
-    let refs: Vec<&CellLight> = cells.iter().collect();
-    let states: Vec<State> = heldout_states().into_iter().take(4).collect();
-    let look = Look::default();
-    // One extra row on top shows each column's monitor frame.
-    let cols = refs.len();
-    let mut sheet = RgbImage::new(cell * cols, cell * (states.len() + 1));
-    for (c, frame) in shown.iter().enumerate() {
-        let thumb = resize_area(frame, 0, 0, frame.width, frame.height, cell, cell * 9 / 16);
-        paste(&mut sheet, &thumb, c * cell, (cell - thumb.height) / 2);
-    }
-    let rendered: Vec<Vec<RgbImage>> = states
-        .par_iter()
-        .map(|s| {
-            let t = r.prepare(&look, s);
-            r.render(&t, &refs)
-                .iter()
-                .map(|img| Sensor::default().clean(img))
-                .collect()
-        })
-        .collect();
-    for (row, imgs) in rendered.iter().enumerate() {
-        for (c, img) in imgs.iter().enumerate() {
-            paste(&mut sheet, img, c * cell, (row + 1) * cell);
-        }
-    }
-    Ok(sheet)
-}
-
-fn paste(dst: &mut RgbImage, src: &RgbImage, x0: usize, y0: usize) {
-    for y in 0..src.height {
-        let d = ((y0 + y) * dst.width + x0) * 3;
-        dst.data[d..d + src.width * 3]
-            .copy_from_slice(&src.data[y * src.width * 3..(y + 1) * src.width * 3]);
-    }
-}
-
-/// Area-weighted resampling of the region (x0, y0, w, h) of `src` to `out_w`×`out_h`.
-pub fn resize_area(
-    src: &RgbImage,
-    x0: usize,
-    y0: usize,
-    w: usize,
-    h: usize,
-    out_w: usize,
-    out_h: usize,
-) -> RgbImage {
-    let mut out = RgbImage::new(out_w, out_h);
-    let sx = w as f32 / out_w as f32;
-    let sy = h as f32 / out_h as f32;
-    for oy in 0..out_h {
-        let (ya, yb) = (oy as f32 * sy, (oy + 1) as f32 * sy);
-        for ox in 0..out_w {
-            let (xa, xb) = (ox as f32 * sx, (ox + 1) as f32 * sx);
-            let mut acc = [0.0f32; 3];
-            let mut wsum = 0.0;
-            for y in ya.floor() as usize..(yb.ceil() as usize).min(h) {
-                let wy = (yb.min(y as f32 + 1.0) - ya.max(y as f32)).max(0.0);
-                for x in xa.floor() as usize..(xb.ceil() as usize).min(w) {
-                    let wx = (xb.min(x as f32 + 1.0) - xa.max(x as f32)).max(0.0);
-                    let p = src.pixel(x0 + x, y0 + y);
-                    for c in 0..3 {
-                        acc[c] += wx * wy * p[c] as f32;
-                    }
-                    wsum += wx * wy;
-                }
-            }
-            let i = (oy * out_w + ox) * 3;
-            for (o, a) in out.data[i..i + 3].iter_mut().zip(acc) {
-                *o = (a / wsum).round() as u8;
-            }
-        }
-    }
-    out
 }

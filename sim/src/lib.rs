@@ -29,5 +29,6 @@ pub mod noise;
 pub mod raster;
 pub mod render;
 pub mod rng;
+pub mod sheet;
 pub mod subject;
 pub mod webcam;

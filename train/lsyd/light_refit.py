@@ -5,7 +5,7 @@ the screen's colour as well as its brightness.
     python -m lsyd.light_refit --run ../runs/t-nopred --data ../data --out ../runs/t-nopred-fitted
 
 Trained jointly with the rest of the network, the light decoder learns the screen's brightness
-but not its colour (README, "Beyond the paper": colour correlation 0.01 on the held-out set),
+but not its colour (docs/accuracy.md, "Beyond the paper": colour correlation 0.01 on the held-out set),
 and unknown-source relighting gets the light's strength but not its hue. Here every other stage
 stays as it is, bit for bit, so relighting with the source light known does not change; only
 the light decoder learns, from the model's own encoder features of every captured frame (the

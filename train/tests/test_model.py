@@ -15,7 +15,7 @@ def test_delighting_removes_the_source_light(sim_data, shipped_model):
     than the raw encoder features (paper section 3.2)."""
     ratios = compare.delighting_ratios(shipped_model, data.Heldout.load(sim_data / "heldout"))
     print(f"de-lit over raw feature distance, median of {len(ratios)}: {np.median(ratios):.3f}")
-    # The paper's losses alone give about 0.95 (README, "Beyond the paper"); the shipped
+    # The paper's losses alone give about 0.95 (docs/accuracy.md, "Beyond the paper"); the shipped
     # model's de-lit consistency loss brings it far lower.
     assert np.median(ratios) < 0.5, np.round(ratios, 3)
 

@@ -84,7 +84,7 @@ pub struct Args {
     resolution: u32,
 
     /// Training steps (batches of 8 pairs). Fine-tuning on about a minute of capture, 100 beat
-    /// 500 and 2000 (README, "A simulated stranger, through the tools"); more capture may want more
+    /// 500 and 2000 (docs/training.md, "A simulated stranger through the tools"); more capture may want more
     #[arg(long, value_name = "N", default_value_t = 100,
           value_parser = clap::value_parser!(u32).range(1..=1_000_000))]
     steps: u32,

@@ -195,7 +195,7 @@ fn run(a: &Args) -> Result<(), String> {
             Ok(())
         }
         "sheet" => {
-            let sheet = dataset::contact_sheet(subject, a.num("cell", 192)?)?;
+            let sheet = deskstage::sheet::contact_sheet(subject, a.num("cell", 192)?)?;
             deskstage::io::write_png(&a.out()?, &sheet).map_err(io)
         }
         "all" => {
@@ -213,7 +213,7 @@ fn run(a: &Args) -> Result<(), String> {
                 r.subject_seed = subject;
                 recording(&out.join("recordings"), r)?;
             }
-            let sheet = dataset::contact_sheet(subject, 192)?;
+            let sheet = deskstage::sheet::contact_sheet(subject, 192)?;
             deskstage::io::write_png(&out.join("contact-sheet.png"), &sheet).map_err(io)
         }
         "speed" => speed(),

@@ -1,7 +1,7 @@
 """Compare trained runs on the validation set: what the additions beyond the paper change.
 
     python -m lsyd.evaluation.compare --data data --runs runs p-r96 e-r96
-    python -m lsyd.evaluation.compare --set heldout ../models/default ../results/default-two-stage/model
+    python -m lsyd.evaluation.compare --set heldout ../models/default ../models/mine
 
 Each run is exported to ``target/compare/<run>`` and scored with ONNX Runtime on the
 validation set (9 poses x 9 lights, exact ground truth): relighting RMSE and FLIP with the
