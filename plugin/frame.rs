@@ -4,7 +4,7 @@
 //! The network sees a square crop resampled to its resolution. Its output goes
 //! back as a lighting change, not as an upscaled image: per RGB channel a
 //! smooth gain `g = (R + ε) / (I + ε)` of the network's relit image `R` over its
-//! input `I`, and the frame becomes `(v' + ε) = g↑ · (v + ε)`, `↑` a bilinear
+//! input `I` ([`change`]), and the frame becomes `(v' + ε) = g↑ · (v + ε)`, `↑` a bilinear
 //! upsampling to the frame. The frame keeps its own detail and takes its
 //! lighting from the network. The gain extends beyond the crop and fades out
 //! round the face ([`gain_field`]), so the change has no edge. YUV is an affine
@@ -681,16 +681,6 @@ fn sample_rows(
     }
 }
 
-/// Constant of the gain `g`: keeps dark regions from amplifying noise.
-const GAIN_EPSILON: f32 = 0.02;
-/// Largest gain applied to the frame's detail, and the most the relit image may
-/// brighten the input (plus [`INVENTED_LIGHT`]).
-const MAX_GAIN: f32 = 4.0;
-/// Luma (sRGB, [0, 1]) the relit image may add where the input is black. The
-/// network has learnt its person's face and can draw it into darkness; light the
-/// input does not carry is invented, so it is bounded to about 1 level in 8 bits.
-const INVENTED_LIGHT: f32 = 0.004;
-
 /// A planar image of 3 × `from` × `from` area-resampled to 3 × `to` × `to`: a
 /// smaller view of a crop already made, without a second pass over the frame.
 pub fn resample_square(image: &[f32], from: usize, to: usize) -> Vec<f32> {
@@ -729,7 +719,7 @@ pub fn resample_square(image: &[f32], from: usize, to: usize) -> Vec<f32> {
 }
 
 /// Rec. 709 luma of pixel `i` of a planar image of `n` pixels a channel.
-fn luma(img: &[f32], n: usize, i: usize) -> f32 {
+pub(crate) fn luma(img: &[f32], n: usize, i: usize) -> f32 {
     0.2126 * img[i] + 0.7152 * img[n + i] + 0.0722 * img[2 * n + i]
 }
 
@@ -740,252 +730,6 @@ pub fn mean_luma(img: &[f32]) -> f32 {
         return 0.0;
     }
     (0..n).map(|i| luma(img, n, i)).sum::<f32>() / n as f32
-}
-
-/// The lighting change at network resolution: per RGB channel the log of a
-/// smooth gain of the frame, `(v' + ε) = g · (v + ε)`, taken from the network's
-/// output over its input. Applied as a [`GainField`] that carries it beyond the
-/// crop and fades it out round the face, so the change has no edge anywhere in
-/// the frame.
-pub struct LightingChange {
-    res: usize,
-    /// Per channel (R, G, B), the log of the gain, smoothed, res × res.
-    log_gain: [Vec<f32>; 3],
-}
-
-impl LightingChange {
-    /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res).
-    pub fn new(input: &[f32], relit: &[f32], res: usize) -> LightingChange {
-        let relit = bound_invented_light(input, relit, res * res);
-        // The change is smooth over many network pixels: at half the
-        // resolution its blurs cost a quarter and lose nothing.
-        let (input, relit, res) = if res >= 64 && res.is_multiple_of(2) {
-            (halve(input, res), halve(&relit, res), res / 2)
-        } else {
-            (input.to_vec(), relit, res)
-        };
-        LightingChange {
-            res,
-            log_gain: smooth_log_gain(&input, &relit, res),
-        }
-    }
-
-    /// Applies the change round `crop` of `frame`: whole near the face, fading
-    /// out over `feather` pixels (see [`GainField`]).
-    pub fn apply(&self, frame: &mut FrameMut, crop: Crop, feather: usize) {
-        self.apply_faded(frame, crop, feather, 1.0);
-    }
-
-    /// [`LightingChange::apply`], shown at `strength` in [0, 1] (a face fading in or out).
-    pub fn apply_faded(&self, frame: &mut FrameMut, crop: Crop, feather: usize, strength: f32) {
-        let size = (frame.width, frame.height);
-        GainField::new(
-            self,
-            crop,
-            feather,
-            strength,
-            frame.format,
-            frame.matrix,
-            size,
-        )
-        .paste(frame);
-    }
-
-    /// Bilinear sample of a res × res `map` at `u` (fractions of the crop),
-    /// taken at the crop's nearest point when `u` lies outside it.
-    fn sample(&self, map: &[f32], u: [f32; 2]) -> f32 {
-        let res = self.res;
-        let last = (res - 1) as f32;
-        let [(x, tx), (y, ty)] = u.map(|u| {
-            let p = (u * res as f32 - 0.5).clamp(0.0, last);
-            let lo = p.floor() as usize;
-            (lo, p - lo as f32)
-        });
-        let at = |x: usize, y: usize| map[y * res + x];
-        let (x1, y1) = ((x + 1).min(res - 1), (y + 1).min(res - 1));
-        let top = at(x, y) + (at(x1, y) - at(x, y)) * tx;
-        let bottom = at(x, y1) + (at(x1, y1) - at(x, y1)) * tx;
-        top + (bottom - top) * ty
-    }
-}
-
-/// A planar image of 3 × res × res (res even) averaged over 2 × 2 pixels.
-fn halve(img: &[f32], res: usize) -> Vec<f32> {
-    let half = res / 2;
-    let mut out = Vec::with_capacity(3 * half * half);
-    for plane in img.chunks_exact(res * res) {
-        for y in 0..half {
-            let (top, bottom) = (&plane[2 * y * res..], &plane[(2 * y + 1) * res..]);
-            out.extend(
-                (0..half).map(|x| {
-                    (top[2 * x] + top[2 * x + 1] + bottom[2 * x] + bottom[2 * x + 1]) * 0.25
-                }),
-            );
-        }
-    }
-    out
-}
-
-/// The relit image with no pixel brighter than the input allows: at most
-/// `MAX_GAIN` times the input's luma plus `INVENTED_LIGHT`, scaled down in all
-/// three channels so its colour stays.
-fn bound_invented_light(input: &[f32], relit: &[f32], n: usize) -> Vec<f32> {
-    let mut out = relit.to_vec();
-    for i in 0..n {
-        let (allowed, have) = (
-            MAX_GAIN * luma(input, n, i) + INVENTED_LIGHT,
-            luma(relit, n, i),
-        );
-        if have > allowed {
-            let scale = allowed / have;
-            for c in 0..3 {
-                out[c * n + i] *= scale;
-            }
-        }
-    }
-    out
-}
-
-/// Radius, as a fraction of the network's resolution, of the blur of the
-/// brightness part of the gain (its mean over the channels): a fifth of the
-/// crop, so the change has no step at the edges of what the network relights
-/// differently (hair and skin, a collar, a jacket against a wall).
-const BRIGHTNESS_SMOOTHING: f32 = 0.45;
-/// Radius of a finer blur of the brightness part: the shading the light puts
-/// on the face (a nose's shadow, a lit cheek), kept only up to
-/// [`SHADING_DETAIL`] from the coarse field.
-const SHADING_SMOOTHING: f32 = 0.06;
-/// How far, in log gain, the finer blur may depart from the coarse one (2%).
-const SHADING_DETAIL: f32 = 0.02;
-/// The same over the face itself (5%): the light's shading of the face (the
-/// side that should brighten, the nose's shadow) is most of what the truth
-/// changes there, and the face has none of the collars, shoulders and hair
-/// lines where a finer change makes steps. Through the element on the
-/// recorded call (`examples/evaluate_element.rs`), face-region RMSE studio /
-/// sunset / left key: 13.84 / 9.98 / 6.72 with 2% everywhere, 13.53 / 9.70 /
-/// 6.59 with 5% over the face, 13.12 / 9.36 / 6.45 with 10%. More costs what
-/// `examples/real_footage.rs` measures: at 10% a real portrait fed as I420
-/// mottles 2.30% over the face (a finer luma change within a chroma sample
-/// is a colour error there; 1.85% at 5%), and from 15% the film clip's box
-/// edge crosses 10%.
-const FACE_SHADING_DETAIL: f32 = 0.05;
-/// Distances from the face's centre in the network's crop, in half face
-/// heights, within which [`FACE_SHADING_DETAIL`] holds and beyond which
-/// [`SHADING_DETAIL`] does, with a smoothstep between.
-const FACE_SHADING_REACH: (f32, f32) = (0.8, 1.2);
-
-/// Per pixel of a res × res map of the network's crop, how far the shading
-/// may depart from the coarse change: [`FACE_SHADING_DETAIL`] over the face,
-/// where the crop rule puts it (`face::CROP_SIDE` face heights across, the
-/// face's centre `face::CROP_LIFT` face heights below the crop's), and
-/// [`SHADING_DETAIL`] beyond it.
-fn shading_caps(res: usize) -> impl Iterator<Item = f32> {
-    let half_face = 0.5 / crate::face::CROP_SIDE;
-    let centre = [0.5, 0.5 + crate::face::CROP_LIFT / crate::face::CROP_SIDE];
-    let (from, to) = FACE_SHADING_REACH;
-    (0..res * res).map(move |i| {
-        let u = [i % res, i / res].map(|v| (v as f32 + 0.5) / res as f32);
-        let distance = (u[0] - centre[0]).hypot(u[1] - centre[1]) / half_face;
-        let t = ((to - distance) / (to - from)).clamp(0.0, 1.0);
-        SHADING_DETAIL + (FACE_SHADING_DETAIL - SHADING_DETAIL) * t * t * (3.0 - 2.0 * t)
-    })
-}
-/// Radius of the blur of the colour part of the gain (each channel's log gain
-/// less the mean): a light's colour changes slowly over a face, and the
-/// network's colour noise would otherwise blotch the skin.
-const COLOUR_SMOOTHING: f32 = 0.45;
-
-/// Two box blurs of a res × res map, of radius `fraction` of `res`.
-fn blur(field: &[f32], res: usize, fraction: f32) -> Vec<f32> {
-    let radius = ((fraction * res as f32).round() as usize).max(1);
-    box_blur(&box_blur(field, res, radius), res, radius)
-}
-
-/// Per channel, the log of the gain the relit image makes of the input,
-/// bounded by [`MAX_GAIN`] each way and smoothed: brightness over
-/// [`BRIGHTNESS_SMOOTHING`] with shading detail, colour over
-/// [`COLOUR_SMOOTHING`]. A gain that is not finite (the network's NaN) counts
-/// as no change.
-fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize) -> [Vec<f32>; 3] {
-    let n = res * res;
-    let log_gain = |c: usize| -> Vec<f32> {
-        (c * n..(c + 1) * n)
-            .map(|i| {
-                let g = ((relit[i] + GAIN_EPSILON) / (input[i] + GAIN_EPSILON)).ln();
-                if g.is_finite() {
-                    g.clamp(-MAX_GAIN.ln(), MAX_GAIN.ln())
-                } else {
-                    0.0
-                }
-            })
-            .collect()
-    };
-    let gains = [log_gain(0), log_gain(1), log_gain(2)];
-    // Each pixel counts by its brightness: the ratios of dark pixels (hair, a
-    // dark room) are the network's least certain and its largest, and would
-    // otherwise spill over the face, which then clips where they do not.
-    let weight: Vec<f32> = (0..n).map(|i| luma(input, n, i) + WEIGHT_FLOOR).collect();
-    // Normalised convolution: the blur of weight × field over the blur of the
-    // weight, the latter once per radius.
-    let blurred_weight = |fraction| (fraction, blur(&weight, res, fraction));
-    let weights = [
-        blurred_weight(BRIGHTNESS_SMOOTHING),
-        blurred_weight(SHADING_SMOOTHING),
-        blurred_weight(COLOUR_SMOOTHING),
-    ];
-    let weighted_blur = |field: &[f32], (fraction, blurred): &(f32, Vec<f32>)| -> Vec<f32> {
-        let product: Vec<f32> = field.iter().zip(&weight).map(|(f, w)| f * w).collect();
-        let mut out = blur(&product, res, *fraction);
-        out.iter_mut().zip(blurred).for_each(|(p, w)| *p /= w);
-        out
-    };
-    let mean: Vec<f32> = (0..n)
-        .map(|i| (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
-        .collect();
-    let coarse = weighted_blur(&mean, &weights[0]);
-    let brightness: Vec<f32> = coarse
-        .iter()
-        .zip(weighted_blur(&mean, &weights[1]))
-        .zip(shading_caps(res))
-        .map(|((c, f), cap)| c + (f - c).clamp(-cap, cap))
-        .collect();
-    gains.map(|g| {
-        let colour: Vec<f32> = g.iter().zip(&mean).map(|(g, m)| g - m).collect();
-        weighted_blur(&colour, &weights[2])
-            .iter()
-            .zip(&brightness)
-            .map(|(c, b)| c + b)
-            .collect()
-    })
-}
-
-/// Added to each pixel's luma as its weight in the gain's blur, so black
-/// regions still count a little.
-const WEIGHT_FLOOR: f32 = 0.02;
-
-/// A box blur of a res × res field, `radius` each way, shrinking at the borders.
-fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
-    fn along(
-        src: &[f32],
-        res: usize,
-        radius: usize,
-        at: impl Fn(usize, usize) -> usize,
-    ) -> Vec<f32> {
-        let mut out = vec![0f32; src.len()];
-        let mut prefix = vec![0f32; res + 1];
-        for line in 0..res {
-            for k in 0..res {
-                prefix[k + 1] = prefix[k] + src[at(line, k)];
-            }
-            for k in 0..res {
-                let (lo, hi) = (k.saturating_sub(radius), (k + radius + 1).min(res));
-                out[at(line, k)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f32;
-            }
-        }
-        out
-    }
-    let rows = along(field, res, radius, |y, x| y * res + x);
-    along(&rows, res, radius, |x, y| y * res + x)
 }
 
 /// `x.round().clamp(0.0, 255.0) as u8` (NaN to 0 as there) in operations that
@@ -1009,10 +753,11 @@ fn round_to_u8(x: f32) -> u8 {
     (shifted.to_bits() + u32::from(c - whole == 0.5)) as u8
 }
 
+mod change;
 mod denoise;
 mod gain_field;
+pub use change::LightingChange;
 pub use denoise::DetailDenoiser;
-use gain_field::GainField;
 
 #[cfg(test)]
 mod reference;

@@ -7,8 +7,11 @@
 # outfit and room) sit one 30 s capture session each in front of the desk light stage;
 # pairs are found by facial keypoints within each session, as on real captures.
 # People 200-207 are never trained on: their held-out sets (9 poses x 9 lights)
-# measure the model on strangers. Every step is skipped when its output exists, so
-# the script resumes where it stopped. Personal models fine-tune from this one.
+# measure the model on strangers. Training has two stages: the paper's losses (with the
+# de-lit consistency and monitor colour terms) for 3000 steps, then 1500 more with the
+# lighting-change loss (docs/training.md), which teaches which side a light comes from.
+# Every step is skipped when its output exists, so the script resumes where it stopped.
+# Personal models fine-tune from this one.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 data=${1:-data/starter}
@@ -39,6 +42,16 @@ if [ ! -f "$run/done" ]; then
     --resolution 96 --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
   touch "$run/done"
 fi
+change_run="$run-change"
+if [ ! -f "$change_run/done" ]; then
+  [ -f "$run/network.pt" ] || (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out "../$run/network.pt")
+  resume=()
+  [ -f "$change_run/checkpoint.pt" ] && resume=(--resume)
+  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$change_run" --steps 1500 \
+    --init "../$run/network.pt" --delit-consistency 0.1 --monitor-colour 1.0 --change 1.0 "${resume[@]}")
+  touch "$change_run/done"
+fi
+run=$change_run
 
 # Export: the contract's stages (checked against PyTorch on a stranger's held-out frames),
 # the saved network personal models fine-tune from, and the test on strangers.

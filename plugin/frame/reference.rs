@@ -2,8 +2,9 @@
 //! channel at a time, the crop resampled horizontally first, each paste
 //! sample of the gain field interpolated on its own over the whole frame.
 
+use super::gain_field::GainField;
 use super::gain_field::dither;
-use super::{AreaWeights, Crop, Frame, FrameMut, GainField, LightingChange, PixelFormat, Plane};
+use super::{AreaWeights, Crop, Frame, FrameMut, LightingChange, PixelFormat, Plane};
 
 /// For packed RGB formats: byte offsets of R, G and B and bytes per pixel.
 pub fn packed(format: PixelFormat) -> Option<([usize; 3], usize)> {

@@ -1,4 +1,5 @@
 use super::*;
+use crate::frame::change::MAX_GAIN;
 use crate::frame::gain_field::INNER_RADIUS;
 use crate::frame::gain_field::yuv::{
     YuvChange, chroma_change, chroma_change_portable, spread, spread_portable, write_lane,

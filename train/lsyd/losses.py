@@ -70,6 +70,32 @@ def light_perceptual(a: torch.Tensor, b: torch.Tensor) -> torch.Tensor:
     return dx + dy
 
 
+# Added to images in [0, 1] before the log of a ratio: the element's `GAIN_EPSILON`.
+CHANGE_EPSILON = 0.02
+# Standard deviation, in pixels of the network's image, of the blur of the change:
+# the scale of a light's shading over a face 33 px across (a side lit, a nose's shadow),
+# and about what the element keeps of the change.
+CHANGE_SIGMA = 2.0
+
+
+def lighting_change(src: torch.Tensor, out: torch.Tensor) -> torch.Tensor:
+    """The smooth part of the per-channel log gain that makes ``out`` of ``src``: the
+    lighting change the element takes from the network and pastes onto the frame. The
+    network's output is not bounded below; a negative value counts as black."""
+    ratio = torch.log(out.clamp(min=0.0) + CHANGE_EPSILON) - torch.log(src.clamp(min=0.0) + CHANGE_EPSILON)
+    c = ratio.shape[1]
+    size = 2 * int(3 * CHANGE_SIGMA) + 1
+    k = _gauss_kernel(size, CHANGE_SIGMA).to(ratio).expand(c, 1, -1, -1)
+    return F.conv2d(F.pad(ratio, [size // 2] * 4, mode="replicate"), k, groups=c)
+
+
+def change_l1(src: torch.Tensor, relit: torch.Tensor, tgt: torch.Tensor) -> torch.Tensor:
+    """L1 between the lighting changes of the relit and the target image from the source.
+    The image losses are dominated by detail the network copies through; this one weighs
+    only what the element uses, where a light falls and how strongly."""
+    return F.l1_loss(lighting_change(src, relit), lighting_change(src, tgt))
+
+
 def monitor_match(pred: torch.Tensor, light: torch.Tensor, l1: float, perceptual: float, colour: float) -> torch.Tensor:
     """How far a predicted monitor light is from the true one: L1, the gradient L1 as its
     perceptual term, and L1 between the two screens' mean colours, each at its weight."""

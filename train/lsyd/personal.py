@@ -37,9 +37,10 @@ from tqdm import tqdm
 from . import contract, data, export, landmarks, pairing, train
 from .runs import LossWeights, TrainConfig, load_network, read_network, save_run_network
 
-# The loss weights of the starter model (and so of its fine-tuning): the paper's, with the
-# de-lit consistency and the monitor's mean colour terms (README, "Beyond the paper").
-WEIGHTS = LossWeights(delit_consistency=0.1, monitor_colour=1.0)
+# The loss weights of the starter model's last stage (and so of its fine-tuning): the
+# paper's, with the de-lit consistency, the monitor's mean colour and the lighting-change
+# terms (docs/training.md), so a fine-tuned model keeps the starter's sense of a light's side.
+WEIGHTS = LossWeights(delit_consistency=0.1, monitor_colour=1.0, change=1.0)
 # Fine-tuning starts from a trained network: half the rate of a run from scratch.
 FINE_TUNE_LR = 1e-4
 # Frames of the held-out session the measures run on (consecutive, from its start).

@@ -50,8 +50,12 @@ class LossWeights:
     delit_consistency: float = 0.0
     # Not in the paper: L1 between the predicted and true screens' mean colours, inside the
     # monitor loss. With the per-pixel terms alone the predicted screen's colour does not
-    # follow the true one (README, "Beyond the paper").
+    # follow the true one (docs/accuracy.md, "Beyond the paper").
     monitor_colour: float = 0.0
+    # Not in the paper: L1 between the smooth log gains of relit and target over the source
+    # (losses.change_l1), the part of the output the element pastes. With the image losses
+    # alone a key from the left and one from the right change a face nearly alike.
+    change: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -30,6 +30,25 @@ pub fn read_y4m(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
     Ok(out)
 }
 
+/// scikit-image's astronaut portrait (public domain, fetched into `media` by
+/// `scripts/setup.sh full`) scaled to 720 rows and centred in a 1280 x 720
+/// frame of mid grey: a real face as a 720p webcam frames it.
+pub fn portrait_720p(media: &Path) -> Result<RgbImage, String> {
+    let path = media.join("astronaut.png");
+    let portrait = image::open(&path)
+        .map_err(|e| format!("{}: {e} (scripts/setup.sh full fetches it)", path.display()))?
+        .to_rgb8();
+    let portrait =
+        image::imageops::resize(&portrait, 720, 720, image::imageops::FilterType::Triangle);
+    let mut frame = image::RgbImage::from_pixel(1280, 720, image::Rgb([96, 96, 96]));
+    image::imageops::overlay(&mut frame, &portrait, 280, 0);
+    Ok(RgbImage {
+        width: 1280,
+        height: 720,
+        data: frame.into_raw(),
+    })
+}
+
 /// Decodes up to `frames` frames of a video, or a still image repeated, as RGB.
 pub fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
     let still = path.extension().is_some_and(|e| e == "png");
@@ -178,10 +197,25 @@ pub fn relight(
     format: Format,
     denoise: bool,
 ) -> Result<Vec<(OwnedFrame, Option<Relit>)>, String> {
+    relight_with(
+        frames,
+        model,
+        &format!("denoise={denoise} target-location=\"{}\"", target.display()),
+        format,
+    )
+}
+
+/// [`relight`] with the element's other properties set by `properties`, as
+/// gst-launch writes them (`target-preset=neon denoise=false`).
+pub fn relight_with(
+    frames: &[RgbImage],
+    model: &Path,
+    properties: &str,
+    format: Format,
+) -> Result<Vec<(OwnedFrame, Option<Relit>)>, String> {
     let element = format!(
-        "lsydrelight name=r denoise={denoise} model-location=\"{}\" target-location=\"{}\"",
-        model.display(),
-        target.display()
+        "lsydrelight name=r model-location=\"{}\" {properties}",
+        model.display()
     );
     run(frames, &format.feeding(&element))
 }

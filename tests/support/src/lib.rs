@@ -10,6 +10,8 @@
 //!   against its exact ground truth;
 //! - [`quality`]: measures of the output that need no ground truth (box edges,
 //!   mottling, pumping), for real footage;
+//! - [`direction`]: how strong a relighting is over a face and which way
+//!   its light falls, with no ground truth;
 //! - [`footage`]: real clips and the simulator's recordings decoded to RGB, and
 //!   relit by the element with no monitor stream, for those measures;
 //! - [`scorecard`]: those measures on real clips and recordings, as the report
@@ -20,6 +22,7 @@
 
 use std::path::{Path, PathBuf};
 
+pub mod direction;
 pub mod element;
 pub mod flow;
 pub mod footage;

@@ -8,7 +8,14 @@
 //! cargo run --example target_lights -- projection results/targets/environment.png
 //! cargo run --example target_lights -- measure [--frames 60] [--model models/default]
 //! cargo run --example target_lights -- timing
+//! cargo run --release --example target_lights -- direction [--frames 30] [--model models/starter] \
+//!     [--out results/direction]
 //! ```
+//!
+//! `direction` measures how strong the relighting is over the face and which
+//! way its light falls (`lsydrelight_testkit::direction`): on real portraits
+//! and clips (from `scripts/setup.sh full`) and on the simulator's `call`,
+//! where the exact render under each light says what the truth gives.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -55,7 +62,21 @@ enum Command {
     },
     /// What target changes and video targets cost.
     Timing,
+    /// Strength and direction of the relighting on real faces and the simulator's.
+    Direction {
+        /// Frames of the `call` recording and of the film clip.
+        #[arg(long, default_value_t = 30)]
+        frames: usize,
+        /// The model folder (default: the element's default, the starter model).
+        #[arg(long)]
+        model: Option<PathBuf>,
+        /// Where the table and the before/after images go.
+        #[arg(long, default_value = "results/direction")]
+        out: PathBuf,
+    },
 }
+
+mod direction;
 
 fn main() -> Result<(), String> {
     match Args::parse().command {
@@ -63,6 +84,11 @@ fn main() -> Result<(), String> {
         Command::Projection { out } => projection(&out),
         Command::Measure { frames, model } => measure(frames, &model.unwrap_or_else(default_model)),
         Command::Timing => timing(),
+        Command::Direction { frames, model, out } => direction::report(
+            frames,
+            &model.unwrap_or_else(gstlsydrelight::paths::default_model),
+            &checkout().join(out),
+        ),
     }
 }
 
@@ -290,9 +316,10 @@ fn measured_targets(map: &Path) -> Vec<Measured> {
     targets
 }
 
-/// Relights the simulator's `call` recording to every preset and to the outdoor
-/// map at four yaws, and scores each against the exact render under that light.
-fn measure(frames: usize, model: &Path) -> Result<(), String> {
+/// The simulator's `call` recording of `frames` frames with the exact render
+/// under every preset and the outdoor map at four yaws (made once, kept in
+/// `target/tmp`), and those targets.
+fn call_recording(frames: usize) -> Result<(PathBuf, Vec<Measured>), String> {
     let dir = checkout().join(format!("target/tmp/targets-call-{frames}"));
     let map = dir.join("outdoor.exr");
     write_exr(512, &map)?;
@@ -315,6 +342,13 @@ fn measure(frames: usize, model: &Path) -> Result<(), String> {
         );
         rec.write(&dir).map_err(|e| e.to_string())?;
     }
+    Ok((dir, targets))
+}
+
+/// Relights the simulator's `call` recording to every preset and to the outdoor
+/// map at four yaws, and scores each against the exact render under that light.
+fn measure(frames: usize, model: &Path) -> Result<(), String> {
+    let (dir, targets) = call_recording(frames)?;
     println!("| target | face-region RMSE | input's RMSE | ms/frame (under load) |");
     println!("|---|---|---|---|");
     let model_str = model.to_string_lossy().into_owned();

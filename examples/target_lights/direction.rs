@@ -1,0 +1,326 @@
+//! How strong the relighting is over a face and which way its light falls,
+//! per preset: on a real portrait in 720p and a real film clip (no ground
+//! truth; with the box-edge and mottling measures beside them, so a weaker
+//! effect cannot pass for a cleaner one), and on the simulator's `call`,
+//! where the exact render under each light gives what the truth's change is.
+//! Writes `<out>/direction.md`, before/after sheets `<out>/<clip>.png`
+//! (input, warm-key-left, cool-key-right, neon) and the maps of those
+//! changes, `<out>/<clip>-change.png` (grey for none, lighter for brighter).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use deskstage::monitor::RgbImage;
+use gstlsydrelight::frame::OwnedFrame;
+use gstlsydrelight::targets::Preset;
+use lsydrelight_testkit::{
+    checkout,
+    direction::{LightShape, light_shape},
+    footage::{Format, Relit, decode, denoised, portrait_720p, read_y4m, relight_with, through},
+    init,
+    quality::{Region, View, box_edge, change_map, mottling, unexplained_box_edge},
+    recording::ensure_clean_face,
+};
+
+/// Contrasting presets: a front light, keys from each side, a rim, and two colours.
+const PRESETS: [Preset; 6] = [
+    Preset::SoftFront,
+    Preset::WarmKeyLeft,
+    Preset::CoolKeyRight,
+    Preset::Rim,
+    Preset::Sunset,
+    Preset::Neon,
+];
+
+/// The presets a before/after sheet shows after the input.
+const SHOWN: [Preset; 3] = [Preset::WarmKeyLeft, Preset::CoolKeyRight, Preset::Neon];
+
+/// Frames a still is shown for; the first few settle the element's temporal filters.
+const STILL_FRAMES: usize = 8;
+
+/// One clip relit to one preset.
+struct Relighting {
+    /// Per frame relit at full strength: its index, the face the element
+    /// marked in it, and the shape of the change over that face.
+    faces: Vec<(usize, Region)>,
+    shapes: Vec<LightShape>,
+    /// The largest box edge over the frames, in all and where the picture
+    /// has no edge, and the median mottling over the face.
+    box_edge: f64,
+    unexplained_box_edge: f64,
+    face_mottling: f64,
+    /// The last frame's output, the map of its change (`change_map`) and the
+    /// square the element relit in it, for the sheets.
+    last: RgbImage,
+    last_change: RgbImage,
+    last_square: Option<Region>,
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+}
+
+/// The relit frames with the face regions the element marked (at full strength).
+fn relit_at_full_strength<'a>(
+    relit: &'a [(OwnedFrame, Option<Relit>)],
+) -> impl Iterator<Item = (usize, Relit)> + 'a {
+    relit.iter().enumerate().filter_map(|(k, (_, r))| {
+        r.filter(|r| r.shown.is_some_and(|(strength, _)| strength >= 0.999))
+            .map(|r| (k, r))
+    })
+}
+
+/// `frames` relit by `model` to `preset` and measured against the input as
+/// the element's denoising left it (so that the change measured is the light's).
+fn relight(frames: &[RgbImage], model: &Path, preset: Preset) -> Result<Relighting, String> {
+    let relit = relight_with(
+        frames,
+        model,
+        &format!("target-preset={} target-transition=0", preset.nick()),
+        Format::Rgb,
+    )?;
+    let regions: Vec<Option<Relit>> = relit.iter().map(|(_, r)| *r).collect();
+    let input = denoised(&through(frames, Format::Rgb)?, &regions)?;
+    let (mut faces, mut shapes, mut mottles) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut edges, mut unexplained) = (Vec::new(), Vec::new());
+    for (k, r) in relit_at_full_strength(&relit) {
+        let (i, o) = (input[k].frame(), relit[k].0.frame());
+        let face = r.region.face_within();
+        faces.push((k, face));
+        shapes.push(light_shape(&View::pixels(i), &View::pixels(o), face));
+        let (luma_in, luma_out) = (View::brightness(i), View::brightness(o));
+        edges.push(box_edge(&luma_in, &luma_out).score);
+        unexplained.push(unexplained_box_edge(&luma_in, &luma_out).score);
+        mottles.push(mottling(&View::colour(i), &View::colour(o), face));
+    }
+    if shapes.is_empty() {
+        return Err(format!(
+            "{}: no frame was relit at full strength (no face found?)",
+            preset.nick()
+        ));
+    }
+    let (last_frame, last_relit) = relit.last().expect("frames");
+    let last = View::pixels(last_frame.frame()).to_rgb_image();
+    let last_input = input.last().expect("frames").frame();
+    let last_change = change_map(
+        &View::brightness(last_input),
+        &View::brightness(last_frame.frame()),
+    );
+    let last_square = last_relit.map(|r| r.region);
+    Ok(Relighting {
+        faces,
+        shapes,
+        box_edge: edges.into_iter().fold(0.0, f64::max),
+        unexplained_box_edge: unexplained.into_iter().fold(0.0, f64::max),
+        face_mottling: median(mottles),
+        last,
+        last_change,
+        last_square,
+    })
+}
+
+/// Median over frames of the difference of two relightings' asymmetries.
+fn key_swap(left: &[LightShape], right: &[LightShape]) -> f64 {
+    median(
+        left.iter()
+            .zip(right)
+            .map(|(l, r)| l.asymmetry - r.asymmetry)
+            .collect(),
+    )
+}
+
+fn median_strength(shapes: &[LightShape]) -> f64 {
+    median(shapes.iter().map(|s| s.strength).collect())
+}
+
+/// A row of images, each cut to `square` (the square the element relit)
+/// where there is one and scaled to `height` rows, with a gap between them.
+fn sheet(images: &[&RgbImage], square: Option<Region>, height: u32) -> image::RgbImage {
+    let gap = 6;
+    let scaled: Vec<image::RgbImage> = images
+        .iter()
+        .map(|img| {
+            let raw =
+                image::RgbImage::from_raw(img.width as u32, img.height as u32, img.data.clone())
+                    .expect("an RGB image");
+            let shown = match square {
+                Some(r) => {
+                    let size = r.size.min(img.width - r.x).min(img.height - r.y) as u32;
+                    image::imageops::crop_imm(&raw, r.x as u32, r.y as u32, size, size).to_image()
+                }
+                None => raw,
+            };
+            let width = (shown.width() * height).div_ceil(shown.height());
+            image::imageops::resize(&shown, width, height, image::imageops::FilterType::Triangle)
+        })
+        .collect();
+    let width = scaled.iter().map(|s| s.width() + gap).sum::<u32>() - gap;
+    let mut out = image::RgbImage::from_pixel(width, height, image::Rgb([255, 255, 255]));
+    let mut x = 0;
+    for s in &scaled {
+        image::imageops::overlay(&mut out, s, x as i64, 0);
+        x += s.width() + gap;
+    }
+    out
+}
+
+/// The report: real footage, then the simulator against its truth.
+pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
+    init();
+    std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
+    let media = checkout().join("target/real-media");
+    let portrait = portrait_720p(&media)?;
+    let clips: [(&str, Vec<RgbImage>); 2] = [
+        ("astronaut-720p", vec![portrait; STILL_FRAMES]),
+        ("megamind", decode(&media.join("Megamind.avi"), frames)?),
+    ];
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "Made by `cargo run --release --example target_lights -- direction --frames {frames}` \
+         with `{}` and the element's other defaults, fed RGB, with no monitor stream.\n\n\
+         Strength: RMS over the face of 100 ln((out + 10) / (in + 10)), luma in levels, in %. \
+         Key swap: the face's image-left less image-right mean change under warm-key-left, \
+         less the same under cool-key-right, in %. Box edge: the largest \
+         straight step in the change where the picture itself has none, and in all \
+         (`lsydrelight_testkit::quality`), largest over the frames and presets; face mottling as \
+         `examples/real_footage.rs` measures it (median).\n",
+        model.strip_prefix(checkout()).unwrap_or(model).display()
+    );
+    let _ = writeln!(md, "## Real footage\n");
+    let header: Vec<&str> = PRESETS.iter().map(|p| p.nick()).collect();
+    let _ = writeln!(
+        md,
+        "| clip | strength: {} | median strength | key swap | box edge where the picture has none (in all) | face mottling |",
+        header.join(" / ")
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|");
+    for (name, frames) in &clips {
+        let relit: Vec<Relighting> = PRESETS
+            .iter()
+            .map(|&p| {
+                eprintln!("{name}: {}", p.nick());
+                relight(frames, model, p)
+            })
+            .collect::<Result<_, _>>()?;
+        let strengths: Vec<f64> = relit.iter().map(|r| median_strength(&r.shapes)).collect();
+        let per_preset: Vec<String> = strengths.iter().map(|s| format!("{s:.1}")).collect();
+        let _ = writeln!(
+            md,
+            "| {name} | {} | {:.1} | {:+.1} | {:.1} ({:.1}) | {:.2} |",
+            per_preset.join(" / "),
+            median(strengths.clone()),
+            key_swap(&relit[1].shapes, &relit[2].shapes),
+            relit
+                .iter()
+                .map(|r| r.unexplained_box_edge)
+                .fold(0.0, f64::max),
+            relit.iter().map(|r| r.box_edge).fold(0.0, f64::max),
+            median(relit.iter().map(|r| r.face_mottling).collect()),
+        );
+        let shown: Vec<&RgbImage> = std::iter::once(frames.last().expect("frames"))
+            .chain(SHOWN.iter().map(|s| {
+                let k = PRESETS.iter().position(|p| p == s).expect("a shown preset");
+                &relit[k].last
+            }))
+            .collect();
+        let path = out.join(format!("{name}.png"));
+        sheet(&shown, relit[0].last_square, 360)
+            .save(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+        let changes: Vec<&RgbImage> = SHOWN
+            .iter()
+            .map(|s| &relit[PRESETS.iter().position(|p| p == s).expect("shown")].last_change)
+            .collect();
+        let path = out.join(format!("{name}-change.png"));
+        sheet(&changes, relit[0].last_square, 360)
+            .save(&path)
+            .map_err(|e| format!("{}: {e}", path.display()))?;
+    }
+    simulator(frames, model, out, &mut md)?;
+    let path = out.join("direction.md");
+    std::fs::write(&path, &md).map_err(|e| format!("{}: {e}", path.display()))?;
+    print!("{md}");
+    Ok(())
+}
+
+/// The simulator's `call`: the truth's change (its exact render under each
+/// preset over the noiseless face) beside the element's, over the face the
+/// element marked.
+fn simulator(frames: usize, model: &Path, out: &Path, md: &mut String) -> Result<(), String> {
+    let (dir, _) = super::call_recording(frames)?;
+    let clean_path = dir.join("clean-face.y4m");
+    ensure_clean_face(&clean_path, "call", frames)?;
+    let clean = read_y4m(&clean_path, frames)?;
+    let face = read_y4m(&dir.join("face.y4m"), frames)?;
+    let _ = writeln!(
+        md,
+        "\n## Simulator (`call`, {frames} frames): the exact truth beside the element\n"
+    );
+    let _ = writeln!(
+        md,
+        "| preset | truth's strength | element's strength | truth's asymmetry | element's asymmetry | truth's box edge, unexplained (in all) | element's |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    let mut swaps = ([0.0; 2], [0.0; 2]);
+    let mut sheet_images = vec![face.last().expect("frames").clone()];
+    let mut square = None;
+    for preset in PRESETS {
+        let relit = relight(&face, model, preset)?;
+        let truth = read_y4m(
+            &dir.join(format!("truth-preset-{}.y4m", preset.nick())),
+            frames,
+        )?;
+        let truth_shapes: Vec<LightShape> = (relit.faces.iter())
+            .map(|&(k, face)| light_shape(&clean[k], &truth[k], face))
+            .collect();
+        // The box edge of the truth's own change: what a relighting as strong
+        // as the truth's scores on that measure (clipped highlights, a lit
+        // face against a dark room).
+        let truth_edges = |measure: fn(&RgbImage, &RgbImage) -> f64| {
+            (relit.faces.iter())
+                .map(|&(k, _)| measure(&clean[k], &truth[k]))
+                .fold(0.0, f64::max)
+        };
+        let truth_edge = truth_edges(|i, o| box_edge(i, o).score);
+        let truth_unexplained = truth_edges(|i, o| unexplained_box_edge(i, o).score);
+        let asymmetry = |s: &[LightShape]| median(s.iter().map(|s| s.asymmetry).collect());
+        let (truth_asym, element_asym) = (asymmetry(&truth_shapes), asymmetry(&relit.shapes));
+        let _ = writeln!(
+            md,
+            "| {} | {:.1} | {:.1} | {truth_asym:+.1} | {element_asym:+.1} | {truth_unexplained:.1} ({truth_edge:.1}) | {:.1} ({:.1}) |",
+            preset.nick(),
+            median_strength(&truth_shapes),
+            median_strength(&relit.shapes),
+            relit.unexplained_box_edge,
+            relit.box_edge,
+        );
+        match preset {
+            Preset::WarmKeyLeft => swaps = ([truth_asym, element_asym], swaps.1),
+            Preset::CoolKeyRight => swaps = (swaps.0, [truth_asym, element_asym]),
+            _ => {}
+        }
+        if SHOWN[..2].contains(&preset) {
+            sheet_images.push(truth.last().expect("frames").clone());
+            square = relit.last_square;
+            sheet_images.push(relit.last);
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nKey swap (warm-key-left's asymmetry less cool-key-right's): truth {:+.1}, element {:+.1}.",
+        swaps.0[0] - swaps.1[0],
+        swaps.0[1] - swaps.1[1]
+    );
+    let path = out.join("call.png");
+    let images: Vec<&RgbImage> = sheet_images.iter().collect();
+    sheet(&images, square, 240)
+        .save(&path)
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let _ = writeln!(
+        md,
+        "\n`call.png`: input, then warm-key-left's truth and output, cool-key-right's truth and output."
+    );
+    Ok(())
+}
