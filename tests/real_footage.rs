@@ -18,7 +18,7 @@ use lsydrelight_testkit::{
     direction::light_shape,
     footage::{Format, decode, denoised, portrait_720p, read_y4m, relight, relight_with, through},
     init,
-    quality::{Region, View, box_edge_score, mean_level, mottling, pumping, unexplained_box_edge},
+    quality::{Region, View, box_edges, mean_level, mottling, pumping},
     recording::ensure_recording,
 };
 
@@ -39,7 +39,7 @@ fn media(name: &str) -> Option<PathBuf> {
 /// One frame's measures.
 struct Measures {
     box_edge: f64,
-    /// The box edge where the picture itself has no edge ([`unexplained_box_edge`]).
+    /// The box edge where the picture itself has no edge ([`box_edges`]).
     unexplained_box_edge: f64,
     /// Over the square the element relit.
     mottling: f64,
@@ -75,10 +75,10 @@ fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<Measures>
             });
             let (i, o) = (i.frame(), o.frame());
             let (colour_in, colour_out) = (View::colour(i), View::colour(o));
-            let (luma_in, luma_out) = (View::brightness(i), View::brightness(o));
+            let edges = box_edges(&View::brightness(i), &View::brightness(o));
             Measures {
-                box_edge: box_edge_score(&luma_in, &luma_out),
-                unexplained_box_edge: unexplained_box_edge(&luma_in, &luma_out).score,
+                box_edge: edges.all.score,
+                unexplained_box_edge: edges.unexplained.score,
                 mottling: mottling(&colour_in, &colour_out, region),
                 face_mottling: mottling(&colour_in, &colour_out, region.face_within()),
                 means: (

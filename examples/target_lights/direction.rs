@@ -18,7 +18,7 @@ use lsydrelight_testkit::{
     direction::{LightShape, light_shape},
     footage::{Format, Relit, decode, denoised, portrait_720p, read_y4m, relight_with, through},
     init,
-    quality::{Region, View, box_edge, change_map, mottling, unexplained_box_edge},
+    quality::{self, Region, View, box_edges, change_map, mottling},
     recording::ensure_clean_face,
 };
 
@@ -90,8 +90,9 @@ fn relight(frames: &[RgbImage], model: &Path, preset: Preset) -> Result<Relighti
         faces.push((k, face));
         shapes.push(light_shape(&View::pixels(i), &View::pixels(o), face));
         let (luma_in, luma_out) = (View::brightness(i), View::brightness(o));
-        edges.push(box_edge(&luma_in, &luma_out).score);
-        unexplained.push(unexplained_box_edge(&luma_in, &luma_out).score);
+        let both = box_edges(&luma_in, &luma_out);
+        edges.push(both.all.score);
+        unexplained.push(both.unexplained.score);
         mottles.push(mottling(&View::colour(i), &View::colour(o), face));
     }
     if shapes.is_empty() {
@@ -278,13 +279,12 @@ fn simulator(frames: usize, model: &Path, out: &Path, md: &mut String) -> Result
         // The box edge of the truth's own change: what a relighting as strong
         // as the truth's scores on that measure (clipped highlights, a lit
         // face against a dark room).
-        let truth_edges = |measure: fn(&RgbImage, &RgbImage) -> f64| {
-            (relit.faces.iter())
-                .map(|&(k, _)| measure(&clean[k], &truth[k]))
-                .fold(0.0, f64::max)
-        };
-        let truth_edge = truth_edges(|i, o| box_edge(i, o).score);
-        let truth_unexplained = truth_edges(|i, o| unexplained_box_edge(i, o).score);
+        let truth_both: Vec<_> = (relit.faces.iter())
+            .map(|&(k, _)| box_edges(&clean[k], &truth[k]))
+            .collect();
+        let largest = |score: fn(&_) -> f64| truth_both.iter().map(score).fold(0.0, f64::max);
+        let truth_edge = largest(|e: &quality::BoxEdges| e.all.score);
+        let truth_unexplained = largest(|e: &quality::BoxEdges| e.unexplained.score);
         let asymmetry = |s: &[LightShape]| median(s.iter().map(|s| s.asymmetry).collect());
         let (truth_asym, element_asym) = (asymmetry(&truth_shapes), asymmetry(&relit.shapes));
         let _ = writeln!(

@@ -295,14 +295,15 @@ pub fn box_edge(input: &impl Pixels, output: &impl Pixels) -> BoxEdge {
     largest_step(&ratio, None, (w, h), r)
 }
 
-/// The largest coherent step of a relit frame's change where the picture
-/// itself has none: each step counts less the larger the input's own step in
-/// luma at the same place, and not at all from [`PICTURE_EDGE`] up. A true
-/// relighting changes a lit face more than the dark room behind it, so its
-/// change steps where the face's outline does (the simulator's exact truth
-/// scores 12-44% on [`box_edge`] for the presets, `examples/target_lights`
-/// `direction`); a box steps across walls and skin alike.
-pub fn unexplained_box_edge(input: &impl Pixels, output: &impl Pixels) -> BoxEdge {
+/// A relit frame's largest coherent steps: in all ([`box_edge`]), and where
+/// the picture itself has none: each step counts less the larger the input's
+/// own step in luma at the same place, and not at all from [`PICTURE_EDGE`]
+/// up. A true relighting changes a lit face more than the dark room behind
+/// it, so its change steps where the face's outline does (the simulator's
+/// exact truth scores 12-44% on [`box_edge`] for the presets,
+/// `examples/target_lights` `direction`); a box steps across walls and skin
+/// alike. The change is smoothed once for both.
+pub fn box_edges(input: &impl Pixels, output: &impl Pixels) -> BoxEdges {
     let (w, h) = input.size();
     let (ratio, r) = smoothed_change(input, output);
     let level: Vec<f64> = (0..h)
@@ -310,7 +311,17 @@ pub fn unexplained_box_edge(input: &impl Pixels, output: &impl Pixels) -> BoxEdg
         .map(|(x, y)| (luma(input.rgb(x, y)) + LOG_EPSILON).ln())
         .collect();
     let picture = box_blur(&level, w, h, r);
-    largest_step(&ratio, Some(&picture), (w, h), r)
+    BoxEdges {
+        all: largest_step(&ratio, None, (w, h), r),
+        unexplained: largest_step(&ratio, Some(&picture), (w, h), r),
+    }
+}
+
+/// A frame's largest box edge in all, and where the picture has none ([`box_edges`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BoxEdges {
+    pub all: BoxEdge,
+    pub unexplained: BoxEdge,
 }
 
 /// A step of the input's smoothed log luma, across the same distance as the
@@ -554,7 +565,7 @@ mod tests {
         assert!(smooth_score < 5.0, "{smooth_score}");
         assert!(box_edge_score(&input, &input) < 1e-9);
         // The box steps across the picture's flat parts: unexplained too.
-        assert!(unexplained_box_edge(&input, &boxed).score > 30.0);
+        assert!(box_edges(&input, &boxed).unexplained.score > 30.0);
     }
 
     #[test]
@@ -568,11 +579,12 @@ mod tests {
         let scene = |x: usize, y: usize| if face(x, y) { [180; 3] } else { [30; 3] };
         let lit = |x: usize, y: usize| if face(x, y) { [240; 3] } else { [33; 3] };
         let (input, output) = (image(w, h, scene), image(w, h, lit));
-        assert!(box_edge_score(&input, &output) > 15.0);
-        assert!(unexplained_box_edge(&input, &output).score < 1.0);
+        let edges = box_edges(&input, &output);
+        assert!(edges.all.score > 15.0);
+        assert!(edges.unexplained.score < 1.0);
         let flat = image(w, h, |_, _| [120; 3]);
         let boxed = image(w, h, |x, y| if face(x, y) { [160; 3] } else { [132; 3] });
-        assert!(unexplained_box_edge(&flat, &boxed).score > 15.0);
+        assert!(box_edges(&flat, &boxed).unexplained.score > 15.0);
     }
 
     #[test]

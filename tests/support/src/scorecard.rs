@@ -28,8 +28,8 @@ use gstlsydrelight::frame::{Frame, OwnedFrame};
 use crate::checkout;
 use crate::footage::{Format, Relit, decode, denoised, read_y4m, relight, through};
 use crate::quality::{
-    BoxEdge, Pixels, Region, View, box_edge, box_edge_score, change_map, mean_level, mottling,
-    mottling_by_luma, pumping, unexplained_box_edge,
+    BoxEdges, Pixels, Region, View, box_edge_score, box_edges, change_map, mean_level, mottling,
+    mottling_by_luma, pumping,
 };
 use crate::recording::ensure_recording;
 
@@ -39,7 +39,7 @@ pub struct Measured {
     pub frames: usize,
     pub box_edge_max: f64,
     pub box_edge_median: f64,
-    /// The largest box edge where the picture has none ([`unexplained_box_edge`]):
+    /// The largest box edge where the picture has none ([`box_edges`]):
     /// the bar `tests/real_footage.rs` holds.
     pub unexplained_box_edge_max: f64,
     pub mottling_median: f64,
@@ -268,13 +268,12 @@ pub fn measure(
         .1;
         (edge, median(face_mottled))
     });
-    let edges: Vec<BoxEdge> = read(&changed, View::brightness)
+    let both: Vec<BoxEdges> = read(&changed, View::brightness)
         .iter()
         .zip(&read(&output, View::brightness))
-        .map(|(i, o)| box_edge(i, o))
+        .map(|(i, o)| box_edges(i, o))
         .collect();
-    let (worst_frame, worst) = edges
-        .iter()
+    let (worst_frame, worst) = (both.iter().map(|e| e.all))
         .enumerate()
         .max_by(|a, b| a.1.score.total_cmp(&b.1.score))
         .expect("at least one frame");
@@ -286,11 +285,9 @@ pub fn measure(
         if worst.vertical { "y" } else { "x" },
         worst.along
     );
-    let edges: Vec<f64> = edges.iter().map(|e| e.score).collect();
-    let unexplained_box_edge_max = read(&changed, View::brightness)
-        .iter()
-        .zip(&read(&output, View::brightness))
-        .map(|(i, o)| unexplained_box_edge(i, o).score)
+    let edges: Vec<f64> = both.iter().map(|e| e.all.score).collect();
+    let unexplained_box_edge_max = (both.iter())
+        .map(|e| e.unexplained.score)
         .fold(0.0, f64::max);
     let (changed_colour, output_colour) =
         (read(&changed, View::colour), read(&output, View::colour));
