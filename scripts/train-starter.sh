@@ -4,12 +4,15 @@
 #   scripts/train-starter.sh [DATA] [RUN]      (defaults: data/starter runs/starter)
 #
 # The simulator's people 100-131 (skin tones, face shapes, hair, each in their own
-# outfit and room) sit one 30 s capture session each in front of the desk light stage;
-# pairs are found by facial keypoints within each session, as on real captures.
-# People 200-207 are never trained on: their held-out sets (9 poses x 9 lights)
-# measure the model on strangers. Training has two stages: the paper's losses (with the
-# de-lit consistency and monitor colour terms) for 3000 steps, then 1500 more with the
-# lighting-change loss (docs/training.md), which teaches which side a light comes from.
+# outfit and room) sit two 30 s capture sessions each: one in front of the desk light
+# stage, and one under the dome the light code stands for (the same kind of pictures as
+# lights from up to 90 degrees to each side; docs/simulator.md), which teaches which side
+# a light comes from. Pairs are found by facial keypoints within each session, as on real
+# captures. People 200-207 are never trained on: their held-out sets (9 poses x 9 lights,
+# on the desk and under the dome) measure the model on strangers. Training has two
+# stages, both with the light field (a map of where the target light falls, drawn into
+# the decoder): the paper's losses (with the de-lit consistency and monitor colour
+# terms) for 3000 steps, then 1500 more with the lighting-change loss (docs/training.md).
 # Every step is skipped when its output exists, so the script resumes where it stopped.
 # Personal models fine-tune from this one.
 set -euo pipefail
@@ -26,20 +29,29 @@ stage=target/release/deskstage
 mkdir -p "$data/captures" "$data/unseen"
 for person in $train_people; do
   session="$data/captures/person-$person"
-  [ -f "$session/face.npy" ] && continue
-  rm -rf "$data/tmp"
-  "$stage" captures --subject "$person" --seed "$person" --sessions 1 --seconds "$seconds" --out "$data/tmp"
-  mv "$data/tmp/session-000" "$session"
+  if [ ! -f "$session/face.npy" ]; then
+    rm -rf "$data/tmp"
+    "$stage" captures --subject "$person" --seed "$person" --sessions 1 --seconds "$seconds" --out "$data/tmp"
+    mv "$data/tmp/session-000" "$session"
+  fi
+  if [ ! -f "$session-dome/face.npy" ]; then
+    rm -rf "$data/tmp"
+    "$stage" captures --subject "$person" --seed "$((person + 1000))" --sessions 1 --seconds "$seconds" \
+      --stage dome --out "$data/tmp"
+    mv "$data/tmp/session-000" "$session-dome"
+  fi
 done
 for person in $unseen_people; do
   [ -f "$data/unseen/person-$person/clean.npy" ] || "$stage" heldout --subject "$person" --out "$data/unseen/person-$person"
+  [ -f "$data/unseen-dome/person-$person/clean.npy" ] ||
+    "$stage" heldout --subject "$person" --stage dome --out "$data/unseen-dome/person-$person"
 done
 
 if [ ! -f "$run/done" ]; then
   resume=()
   [ -f "$run/checkpoint.pt" ] && resume=(--resume)
   (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$run" --steps "$steps" \
-    --resolution 96 --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
+    --resolution 96 --light-field --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
   touch "$run/done"
 fi
 change_run="$run-change"
@@ -59,3 +71,4 @@ run=$change_run
 (cd train && ../.venv/bin/python -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter --name starter)
 (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out ../models/starter/network.pt)
 (cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data")
+(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data" --stage dome)

@@ -27,6 +27,7 @@ use gstlsydrelight::face::{
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::paths::default_ort_library;
 use lsydrelight_testkit::checkout;
+use lsydrelight_testkit::footage::small_portrait_1080p;
 use lsydrelight_testkit::person::render_person;
 
 fn detector() -> FaceDetector {
@@ -527,6 +528,60 @@ fn a_real_portrait_is_found_as_mediapipe_finds_it() {
             worst < 8.0,
             "{}: {worst:.1} px from MediaPipe: {f:?} vs {want}",
             image["image"]
+        );
+    }
+}
+
+#[test]
+fn small_real_faces_off_centre_are_found_by_the_scan_and_then_kept() {
+    let media = checkout().join("target/real-media");
+    if !media.join("astronaut.png").is_file() {
+        println!(
+            "SKIPPED: {} has no astronaut.png; scripts/setup.sh full fetches it",
+            media.display()
+        );
+        return;
+    }
+    let scan = gstlsydrelight::face::search::tiles(1920, 1080).len();
+    let searches = scan.div_ceil(gstlsydrelight::face::search::TILES_PER_SEARCH);
+    for (fraction, centre) in [
+        (0.10, [0.8, 0.3]),
+        (0.05, [0.25, 0.7]),
+        (0.05, [0.55, 0.15]),
+    ] {
+        let (img, face, height) = small_portrait_1080p(&media, fraction, centre).unwrap();
+        let mut det = detector();
+        let first = det.detect(&frame(&img)).unwrap();
+        assert!(
+            first.is_empty(),
+            "the whole frame's letterbox shows it too small: {first:?}"
+        );
+        let found_after = (1..=searches).find(|_| !det.detect(&frame(&img)).unwrap().is_empty());
+        let Some(after) = found_after else {
+            panic!(
+                "a face {fraction} of the height at {centre:?} was not found in a whole scan ({searches} detections)"
+            );
+        };
+        // Once found, it is found again at once, round where it was.
+        for _ in 0..3 {
+            let faces = det.detect(&frame(&img)).unwrap();
+            let f = faces
+                .first()
+                .unwrap_or_else(|| panic!("lost the face at {centre:?}"));
+            assert!(
+                (f.cx - face[0]).hypot(f.cy - face[1]) < 0.3 * height
+                    && (f.height / height - 1.0).abs() < 0.3,
+                "{f:?} against the face at {face:?}, {height} px high"
+            );
+            assert!(
+                det.last_search.near && det.last_search.tiles == 0,
+                "{:?}",
+                det.last_search
+            );
+        }
+        println!(
+            "a face {fraction} of 1080p's height at {centre:?}: found by detection {} of the scan",
+            after + 1
         );
     }
 }

@@ -16,7 +16,10 @@ use deskstage::monitor::RgbImage;
 use lsydrelight_testkit::{
     checkout,
     direction::light_shape,
-    footage::{Format, decode, denoised, portrait_720p, read_y4m, relight, relight_with, through},
+    footage::{
+        Format, decode, denoised, portrait_720p, read_y4m, relight, relight_with,
+        small_portrait_1080p, through,
+    },
     init,
     quality::{Region, View, box_edges, mean_level, mottling, pumping},
     recording::ensure_recording,
@@ -270,4 +273,50 @@ fn a_real_portrait_relit_to_neon_changes_visibly() {
     );
     assert!(shape.strength > 9.0, "{shape:?}");
     assert!(shape.asymmetry.abs() < shape.strength, "{shape:?}");
+}
+
+#[test]
+fn a_small_face_off_centre_in_1080p_is_found_and_relit() {
+    // A face a tenth of the frame's height is 7 pixels tall in the face
+    // detector's view of the whole 1080p frame, too small for it: the element
+    // passed it through untouched. The detector's scan of tiles finds it
+    // (`gstlsydrelight::face::search`), and the face is relit.
+    init();
+    let Some(path) = media("astronaut.png") else {
+        return;
+    };
+    let folder = path.parent().expect("the media folder");
+    let (frame, face, height) = small_portrait_1080p(folder, 0.10, [0.8, 0.3]).unwrap();
+    let frames = vec![frame; 60];
+    let model = gstlsydrelight::paths::default_model();
+    let relit = relight_with(
+        &frames,
+        &model,
+        "target-preset=neon target-transition=0",
+        Format::Rgb,
+    )
+    .unwrap();
+    let (output, shown) = relit.last().unwrap();
+    let shown = shown.expect("the small face is found and relit");
+    let region = shown.region.face_within();
+    let centre = [region.x, region.y].map(|c| (c + region.size / 2) as f32);
+    assert!(
+        (centre[0] - face[0]).hypot(centre[1] - face[1]) < 0.5 * height,
+        "relit round {centre:?}, the face is at {face:?}"
+    );
+    assert!(
+        shown.shown.is_some_and(|(strength, _)| strength > 0.99),
+        "{shown:?}"
+    );
+    let input = denoised(
+        &through(&frames, Format::Rgb).unwrap(),
+        &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
+    )
+    .unwrap();
+    let shape = light_shape(
+        &View::pixels(input.last().unwrap().frame()),
+        &View::pixels(output.frame()),
+        region,
+    );
+    assert!(shape.strength > 5.0, "{shape:?}");
 }

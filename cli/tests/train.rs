@@ -121,6 +121,27 @@ fn train_makes_a_model_the_element_relights_with() {
         );
     }
     assert!(log.contains("training pairs"), "pairs reported: {log}");
+    // The simulator's dome sessions are trained on beside the person's own, and paired.
+    assert!(log.contains("4 rehearsal sessions"), "{log}");
+    let pairing: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("training/pairing.json")).unwrap())
+            .unwrap();
+    let rehearsed: Vec<&serde_json::Value> = pairing["sessions"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|s| {
+            s["session"]
+                .as_str()
+                .unwrap()
+                .starts_with("rehearsal-dome-")
+        })
+        .collect();
+    assert_eq!(rehearsed.len(), 4, "{pairing}");
+    assert!(
+        rehearsed.iter().all(|s| s["pairs"].as_u64().unwrap() > 0),
+        "{pairing}"
+    );
     assert!(log.contains("the element loads"), "{log}");
 
     // The model: the contract's manifest and stages, the saved network, the measures.

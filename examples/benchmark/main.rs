@@ -6,7 +6,11 @@
 //! cargo run --release --example benchmark -- --first-frame [--repeats 7]
 //! cargo run --release --example benchmark -- --reuse [--rounds 3] [--only steady,1280x720] [--out results/benchmark]
 //! cargo run --release --example benchmark -- --quality [--frames 90] [--out results/benchmark]
+//! cargo run --release --example benchmark -- --face-search [--rounds 3] [--out results/benchmark]
 //! ```
+//!
+//! `--face-search` times the face detector at 1080p with and without its search
+//! for small faces (`gstlsydrelight::face::search`) and writes `<out>/face-search.md`.
 //!
 //! `--reuse` measures what the reuse interval buys where the network dominates:
 //! the element's own time a frame at 720p and 1080p (the recordings upscaled
@@ -40,6 +44,7 @@
 //! images into `results/tmp/quality/`, not committed). `examples/real_footage.rs` prints the same
 //! report for other settings.
 
+mod face_search;
 mod first_frame;
 mod full_run;
 mod latency;
@@ -53,6 +58,7 @@ use std::process::Command;
 use clap::{ArgGroup, Parser};
 use lsydrelight_testkit::{checkout, recording::ensure_recording};
 
+use face_search::face_search;
 use first_frame::first_frame;
 use full_run::{Variant, run_child, variants};
 use quality::quality;
@@ -83,7 +89,7 @@ pub(crate) fn recording_dir(name: &str) -> Result<PathBuf, String> {
 /// The element's side of the run-time against error benchmark. With no mode,
 /// the full run: every variant in its own process, into `<out>/element.json`.
 #[derive(Parser)]
-#[command(group(ArgGroup::new("mode").args(["stages", "first_frame", "reuse", "quality"])))]
+#[command(group(ArgGroup::new("mode").args(["stages", "first_frame", "reuse", "quality", "face_search"])))]
 struct Args {
     /// Where results go (default: results/benchmark).
     #[arg(long)]
@@ -106,7 +112,10 @@ struct Args {
     /// What the output looks like, measured without ground truth.
     #[arg(long)]
     quality: bool,
-    /// --stages and --reuse: interleaved rounds.
+    /// What looking for small faces costs the face detector at 1080p.
+    #[arg(long)]
+    face_search: bool,
+    /// --stages, --reuse and --face-search: interleaved rounds.
     #[arg(long, default_value_t = 3)]
     rounds: usize,
     /// --stages: cases such as 1280x720/I420; --reuse: recordings and sizes such as steady,1280x720.
@@ -170,6 +179,8 @@ fn main() -> Result<(), String> {
         Some(("quality.md", quality(args.frames)?))
     } else if args.reuse {
         Some(("reuse.md", reuse(args.rounds, &args.only)?))
+    } else if args.face_search {
+        Some(("face-search.md", face_search(args.rounds)?))
     } else {
         None
     };

@@ -10,6 +10,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
+use deskstage::dataset::Stage;
 use deskstage::monitor::RgbImage;
 use gstlsydrelight::frame::OwnedFrame;
 use gstlsydrelight::targets::Preset;
@@ -167,7 +168,7 @@ fn sheet(images: &[&RgbImage], square: Option<Region>, height: u32) -> image::Rg
 }
 
 /// The report: real footage, then the simulator against its truth.
-pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
+pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(), String> {
     init();
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let media = checkout().join("target/real-media");
@@ -179,7 +180,7 @@ pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
     let mut md = String::new();
     let _ = writeln!(
         md,
-        "Made by `cargo run --release --example target_lights -- direction --frames {frames}` \
+        "Made by `cargo run --release --example target_lights -- direction --frames {frames} --stage {}` \
          with `{}` and the element's other defaults, fed RGB, with no monitor stream.\n\n\
          Strength: RMS over the face of 100 ln((out + 10) / (in + 10)), luma in levels, in %. \
          Key swap: the face's image-left less image-right mean change under warm-key-left, \
@@ -187,6 +188,7 @@ pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
          straight step in the change where the picture itself has none, and in all \
          (`lsydrelight_testkit::quality`), largest over the frames and presets; face mottling as \
          `examples/real_footage.rs` measures it (median).\n",
+        stage.name(),
         model.strip_prefix(checkout()).unwrap_or(model).display()
     );
     let _ = writeln!(md, "## Real footage\n");
@@ -239,7 +241,7 @@ pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
             .save(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?;
     }
-    simulator(frames, model, out, &mut md)?;
+    simulator(frames, model, out, stage, &mut md)?;
     let path = out.join("direction.md");
     std::fs::write(&path, &md).map_err(|e| format!("{}: {e}", path.display()))?;
     print!("{md}");
@@ -249,15 +251,22 @@ pub fn report(frames: usize, model: &Path, out: &Path) -> Result<(), String> {
 /// The simulator's `call`: the truth's change (its exact render under each
 /// preset over the noiseless face) beside the element's, over the face the
 /// element marked.
-fn simulator(frames: usize, model: &Path, out: &Path, md: &mut String) -> Result<(), String> {
-    let (dir, _) = super::call_recording(frames)?;
+fn simulator(
+    frames: usize,
+    model: &Path,
+    out: &Path,
+    stage: Stage,
+    md: &mut String,
+) -> Result<(), String> {
+    let (dir, _) = super::call_recording(frames, stage)?;
     let clean_path = dir.join("clean-face.y4m");
     ensure_clean_face(&clean_path, "call", frames)?;
     let clean = read_y4m(&clean_path, frames)?;
     let face = read_y4m(&dir.join("face.y4m"), frames)?;
     let _ = writeln!(
         md,
-        "\n## Simulator (`call`, {frames} frames): the exact truth beside the element\n"
+        "\n## Simulator (`call`, {frames} frames, the targets' truth lit from the {}): the exact truth beside the element\n",
+        stage.name()
     );
     let _ = writeln!(
         md,

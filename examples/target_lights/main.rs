@@ -22,7 +22,7 @@ use std::time::Instant;
 
 use clap::{Parser, Subcommand};
 use deskstage::content::{FRAME_HEIGHT, FRAME_WIDTH};
-use deskstage::dataset::{Recording, RecordingSpec, light_of};
+use deskstage::dataset::{Recording, RecordingSpec, Stage, light_of};
 use deskstage::math::Vec3;
 use deskstage::monitor::RgbImage;
 use deskstage::subject::State;
@@ -59,6 +59,10 @@ enum Command {
         /// The model folder (default: the element's default model).
         #[arg(long)]
         model: Option<PathBuf>,
+        /// Where the truth's target lights shine from: `desk` (the screen) or
+        /// `dome` (the 180-degree field the light code stands for).
+        #[arg(long, default_value = "desk", value_parser = Stage::from_name)]
+        stage: Stage,
     },
     /// What target changes and video targets cost.
     Timing,
@@ -73,6 +77,9 @@ enum Command {
         /// Where the table and the before/after images go.
         #[arg(long, default_value = "results/direction")]
         out: PathBuf,
+        /// Where the simulator truth's target lights shine from (as for `measure`).
+        #[arg(long, default_value = "desk", value_parser = Stage::from_name)]
+        stage: Stage,
     },
 }
 
@@ -82,12 +89,22 @@ fn main() -> Result<(), String> {
     match Args::parse().command {
         Command::Sheet { out } => sheet(&out),
         Command::Projection { out } => projection(&out),
-        Command::Measure { frames, model } => measure(frames, &model.unwrap_or_else(default_model)),
+        Command::Measure {
+            frames,
+            model,
+            stage,
+        } => measure(frames, &model.unwrap_or_else(default_model), stage),
         Command::Timing => timing(),
-        Command::Direction { frames, model, out } => direction::report(
+        Command::Direction {
+            frames,
+            model,
+            out,
+            stage,
+        } => direction::report(
             frames,
             &model.unwrap_or_else(gstlsydrelight::paths::default_model),
             &checkout().join(out),
+            stage,
         ),
     }
 }
@@ -317,16 +334,18 @@ fn measured_targets(map: &Path) -> Vec<Measured> {
 }
 
 /// The simulator's `call` recording of `frames` frames with the exact render
-/// under every preset and the outdoor map at four yaws (made once, kept in
-/// `target/tmp`), and those targets.
-fn call_recording(frames: usize) -> Result<(PathBuf, Vec<Measured>), String> {
-    let dir = checkout().join(format!("target/tmp/targets-call-{frames}"));
+/// under every preset and the outdoor map at four yaws, those lights shining
+/// from `stage` (made once, kept in `target/tmp`), and those targets.
+fn call_recording(frames: usize, stage: Stage) -> Result<(PathBuf, Vec<Measured>), String> {
+    let suffix = if stage == Stage::Dome { "-dome" } else { "" };
+    let dir = checkout().join(format!("target/tmp/targets-call-{frames}{suffix}"));
     let map = dir.join("outdoor.exr");
     write_exr(512, &map)?;
     let targets = measured_targets(&map);
     if !dir.join("meta.json").exists() {
         let mut spec = RecordingSpec::standard("call").ok_or("no call recording")?;
         spec.frames = frames;
+        spec.truth_stage = stage;
         let mut rec = Recording::new(spec)?;
         for t in &targets {
             // The monitor shows the light itself: each grid cell a flat block.
@@ -347,8 +366,8 @@ fn call_recording(frames: usize) -> Result<(PathBuf, Vec<Measured>), String> {
 
 /// Relights the simulator's `call` recording to every preset and to the outdoor
 /// map at four yaws, and scores each against the exact render under that light.
-fn measure(frames: usize, model: &Path) -> Result<(), String> {
-    let (dir, targets) = call_recording(frames)?;
+fn measure(frames: usize, model: &Path, stage: Stage) -> Result<(), String> {
+    let (dir, targets) = call_recording(frames, stage)?;
     println!("| target | face-region RMSE | input's RMSE | ms/frame (under load) |");
     println!("|---|---|---|---|");
     let model_str = model.to_string_lossy().into_owned();

@@ -3,12 +3,15 @@
 //!
 //! - [`detector`]: BlazeFace short-range (`models/face/blazeface.onnx`) through
 //!   ONNX Runtime: a frame to the faces in it ([`FaceBox`]).
+//! - [`search`]: the squares the detector looks in for faces too small for the
+//!   whole frame: round a small face it found, and a scan of tiles.
 //! - [`tracker`]: pure logic over the detector's answers: when to run it,
 //!   which face to follow, smoothing, and a fade when the face goes or comes.
 //! - Here: the face box, the square crop and the one rule between them
 //!   ([`crop_from_face`]), and the small resampler both use ([`sample_square`]).
 
 pub mod detector;
+pub mod search;
 pub mod tracker;
 
 pub use detector::{DetectorError, FaceDetector};
@@ -43,6 +46,13 @@ pub const KEYPOINTS: [&str; 6] = [
 impl FaceBox {
     pub fn area(&self) -> f32 {
         self.width * self.height
+    }
+
+    /// Whether `other` is a detection of the same face: their centres are
+    /// less than a face height apart.
+    pub fn is_same_face(&self, other: &FaceBox) -> bool {
+        let distance = (self.cx - other.cx).hypot(self.cy - other.cy);
+        distance < self.height.max(other.height)
     }
 }
 

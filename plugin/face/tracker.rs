@@ -192,7 +192,7 @@ impl FaceTracker {
     /// followed one, or is missing.
     fn observe(&mut self, faces: &[FaceBox]) {
         match (self.choose(faces), self.followed) {
-            (Some(face), Some(followed)) if same_face(&face, &followed) => {
+            (Some(face), Some(followed)) if face.is_same_face(&followed) => {
                 self.followed = Some(face);
                 self.missing_for = None;
                 self.pending = None;
@@ -215,7 +215,7 @@ impl FaceTracker {
     /// The face the settings ask for, if there are enough faces.
     fn choose(&self, faces: &[FaceBox]) -> Option<FaceBox> {
         let weight = |f: &FaceBox| match self.followed {
-            Some(followed) if same_face(f, &followed) => f.area() * STICKY,
+            Some(followed) if f.is_same_face(&followed) => f.area() * STICKY,
             _ => f.area(),
         };
         let mut ranked = faces.to_vec();
@@ -256,12 +256,6 @@ impl FaceTracker {
             self.fade = target;
         }
     }
-}
-
-/// Two detections of one face: their centres less than a face height apart.
-fn same_face(a: &FaceBox, b: &FaceBox) -> bool {
-    let distance = (a.cx - b.cx).hypot(a.cy - b.cy);
-    distance < a.height.max(b.height)
 }
 
 /// Where the tracking confidence looks: the face box widened by half.

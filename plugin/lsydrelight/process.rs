@@ -69,6 +69,15 @@ impl LsydRelight {
                 .region
                 .locate(&view, time, settings)
                 .map_err(|e| self.engine_failed(e))?;
+            if let Some(step) = region.search.filter(|s| s.near || s.tiles > 0) {
+                gst::debug!(
+                    CAT,
+                    imp = self,
+                    "looked for a small face: {} round the last one, {} tiles of the scan",
+                    if step.near { "again" } else { "not" },
+                    step.tiles
+                );
+            }
             if let Some(face) = region.detected {
                 gst::debug!(
                     CAT,

@@ -7,6 +7,7 @@ use std::time::Instant;
 
 use crate::engine::CropSpec;
 use crate::engine::EngineError;
+use crate::face::detector::SearchStep;
 use crate::face::{CropRule, DetectorError, FaceBox, FaceDetector, FaceTracker, TrackerSettings};
 use crate::frame::{Crop, Frame};
 
@@ -19,6 +20,8 @@ pub struct Region {
     pub strength: f32,
     /// The followed face, when the detector ran on this frame.
     pub detected: Option<FaceBox>,
+    /// Where the detector looked beyond the whole frame, when it ran.
+    pub search: Option<SearchStep>,
 }
 
 /// Work done following the face, for statistics.
@@ -88,6 +91,7 @@ impl FaceRegion {
                 crop: Crop::centred(width, height, manual.x, manual.y, manual.size),
                 strength: 1.0,
                 detected: None,
+                search: None,
             });
         };
         let started = Instant::now();
@@ -100,6 +104,7 @@ impl FaceRegion {
             crop: tracked.square.crop(width, height),
             strength: tracked.fade,
             detected: tracked.face.filter(|_| tracked.detected),
+            search: tracked.detected.then_some(detector.last_search),
         })
     }
 }

@@ -72,6 +72,10 @@ pub enum Style {
     Slow,
     /// Hard scene cuts every half second to second and a half.
     Cuts,
+    /// A light stage's: one bright area at a time anywhere on the screen (or
+    /// a whole screen of colour, or an environment), held a second or two, so
+    /// that a held pose sees light from many sides.
+    Stage,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -142,6 +146,21 @@ impl Clip {
             size: r.range(0.12, 0.3),
             from: (a, y),
             to: (b, r.range(0.2, 0.8)),
+        }
+    }
+
+    /// A still bright area anywhere on the screen: one light of a light stage.
+    pub fn random_light(r: &mut Rng) -> Clip {
+        let at = (r.range(0.05, 0.95), r.range(0.1, 0.9));
+        Clip::Patch {
+            colour: if r.chance(0.5) {
+                Vec3::new(1.0, 1.0, 1.0)
+            } else {
+                colour(r)
+            },
+            size: r.range(0.15, 0.5),
+            from: at,
+            to: at,
         }
     }
 
@@ -329,6 +348,14 @@ impl Playlist {
                         Clip::random_env(&mut r, speed)
                     };
                     (clip, r.range(3.0, 5.0) as f64, r.range(1.5, 2.5) as f64)
+                }
+                Style::Stage => {
+                    let clip = match r.below(5) {
+                        0 => Clip::random_env(&mut r, 0.0),
+                        1 => Clip::Solid(colour(&mut r)),
+                        _ => Clip::random_light(&mut r),
+                    };
+                    (clip, r.range(1.0, 2.5) as f64, 0.0)
                 }
                 Style::Cuts => {
                     let clip = match r.below(3) {
@@ -580,5 +607,27 @@ mod tests {
         let p = Playlist::random(1, "rec", 10.0, Style::Cuts);
         assert!(p.segments.len() >= 7);
         assert!(p.cut_between(0.0, 10.0));
+    }
+
+    #[test]
+    fn a_light_stage_shows_single_lights_on_both_sides() {
+        let p = Playlist::random(3, "stage", 30.0, Style::Stage);
+        let lights: Vec<f32> = (p.segments.iter())
+            .filter_map(|s| match s.clip {
+                Clip::Patch { from, to, .. } if from == to => Some(from.0),
+                _ => None,
+            })
+            .collect();
+        assert!(lights.len() * 2 > p.segments.len(), "mostly single lights");
+        assert!(
+            lights.iter().any(|&x| x < 0.3) && lights.iter().any(|&x| x > 0.7),
+            "{lights:?}"
+        );
+        // Held a second or more, cut from one to the next.
+        assert!(
+            p.segments
+                .iter()
+                .all(|s| s.duration >= 1.0 && s.fade_in == 0.0)
+        );
     }
 }

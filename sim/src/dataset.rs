@@ -22,7 +22,7 @@ use crate::content::{self, Clip, FRAME_HEIGHT, FRAME_WIDTH, Playlist, Style};
 use crate::material::{Ambient, AmbientKind, Look, NEUTRAL};
 use crate::math::Vec3;
 use crate::mesh::landmarks_3d;
-use crate::monitor::{CellLight, RgbImage};
+use crate::monitor::{CellLight, MonitorGeometry, RgbImage};
 use crate::motion::{Range, Trajectory, Waypoint};
 use crate::render::{Renderer, Scene, Sensor};
 use crate::rng::{Rng, hash, label};
@@ -87,10 +87,63 @@ pub(crate) fn still_lights(r: &Renderer, clips: &[Clip]) -> (Vec<RgbImage>, Vec<
     (shown, cells)
 }
 
-/// The renderer of captures and the held-out set: a square camera on the default desk.
-fn square_renderer(subject_seed: u64, size: usize) -> io::Result<Renderer> {
-    Renderer::new(Scene::new(Subject::from_seed(subject_seed), size, size))
-        .map_err(io::Error::other)
+/// Where a dataset's monitor lights shine from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stage {
+    /// The desk's screen: what an at-home capture records.
+    #[default]
+    Desk,
+    /// The dome the light code stands for (`MonitorGeometry::dome`): the
+    /// grid's pictures as lights from up to 90 degrees to each side, showing a
+    /// light stage's lights (`Style::Stage`), where the starter model learns
+    /// which side a light comes from.
+    Dome,
+}
+
+impl Stage {
+    pub fn from_name(name: &str) -> Result<Stage, String> {
+        match name {
+            "desk" => Ok(Stage::Desk),
+            "dome" => Ok(Stage::Dome),
+            _ => Err(format!("--stage {name}: one of desk or dome")),
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Desk => "desk",
+            Stage::Dome => "dome",
+        }
+    }
+
+    fn is_desk(&self) -> bool {
+        *self == Stage::Desk
+    }
+
+    /// What a capture session on this stage shows: videos on the desk, a
+    /// light stage's lights under the dome.
+    pub fn style(self) -> Style {
+        match self {
+            Stage::Desk => Style::Capture,
+            Stage::Dome => Style::Stage,
+        }
+    }
+
+    pub fn monitor(self) -> MonitorGeometry {
+        match self {
+            Stage::Desk => MonitorGeometry::default(),
+            Stage::Dome => MonitorGeometry::dome(),
+        }
+    }
+}
+
+/// The renderer of captures and the held-out set: a square camera at the desk,
+/// its monitor's lights on `stage`.
+fn square_renderer(subject_seed: u64, size: usize, stage: Stage) -> io::Result<Renderer> {
+    let mut scene = Scene::new(Subject::from_seed(subject_seed), size, size);
+    scene.monitor = stage.monitor();
+    Renderer::new(scene).map_err(io::Error::other)
 }
 
 /// The monitor's cell light for a frame it shows.
@@ -115,6 +168,9 @@ pub struct CaptureSpec {
     /// Frames kept per second of capture.
     pub fps: f64,
     pub size: usize,
+    /// Where the monitor's light shines from (desk when a spec predates it).
+    #[serde(default, skip_serializing_if = "Stage::is_desk")]
+    pub stage: Stage,
 }
 
 impl Default for CaptureSpec {
@@ -126,6 +182,7 @@ impl Default for CaptureSpec {
             seconds: 60.0,
             fps: 10.0,
             size: CAPTURE_SIZE,
+            stage: Stage::Desk,
         }
     }
 }
@@ -147,7 +204,7 @@ struct CaptureMeta<'a> {
 /// `keypoints.npy`, `truth.npy` and `meta.json` in `dir`.
 pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = square_renderer(spec.subject_seed, spec.size)?;
+    let r = square_renderer(spec.subject_seed, spec.size, spec.stage)?;
     let domain = format!("train-{session}");
     let look = Look::random(spec.seed, &domain);
     let motion = Trajectory::random(
@@ -161,7 +218,7 @@ pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Resu
         spec.seed,
         &format!("{domain}-monitor"),
         spec.seconds,
-        Style::Capture,
+        spec.stage.style(),
     );
     let frames = (spec.seconds * spec.fps).round() as usize;
     let sensor = Sensor::default();
@@ -213,7 +270,7 @@ pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Resu
 /// lights: `face.npy` (poses, lights, S, S, 3), `monitor.npy`, `keypoints.npy`, `truth.npy`.
 pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = square_renderer(spec.subject_seed, spec.size)?;
+    let r = square_renderer(spec.subject_seed, spec.size, spec.stage)?;
     let s = spec.size;
     let sensor = Sensor::default();
     let mut face =
@@ -266,7 +323,7 @@ pub fn write_paired(dir: &Path, spec: &CaptureSpec, poses: usize, lights: usize)
 /// monitor content and room light: `face.npy` (frames, S, S, 3).
 pub fn write_absent(dir: &Path, spec: &CaptureSpec, frames: usize) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = square_renderer(spec.subject_seed, spec.size)?;
+    let r = square_renderer(spec.subject_seed, spec.size, spec.stage)?;
     let s = spec.size;
     let mut face = crate::io::NpyWriter::<u8>::create(&dir.join("face.npy"), &[frames, s, s, 3])?;
     let mut rng = Rng::stream(spec.seed, "absent");
@@ -429,9 +486,15 @@ impl TestSet {
 /// Writes a test set: `images.npy` (9 poses, 9 lights, S, S, 3) as the
 /// webcam records them, `clean.npy` the same without sensor noise (exact
 /// ground truth), `monitor.npy` (9, H, W, 3), `keypoints.npy` and `truth.npy`.
-pub fn write_test_set(dir: &Path, set: TestSet, subject_seed: u64, size: usize) -> io::Result<()> {
+pub fn write_test_set(
+    dir: &Path,
+    set: TestSet,
+    subject_seed: u64,
+    size: usize,
+    stage: Stage,
+) -> io::Result<()> {
     fs::create_dir_all(dir)?;
-    let r = square_renderer(subject_seed, size)?;
+    let r = square_renderer(subject_seed, size, stage)?;
     let (states, clips, look) = set.contents(subject_seed);
     let (shown, cells) = still_lights(&r, &clips);
     let refs: Vec<&CellLight> = cells.iter().collect();
@@ -509,6 +572,11 @@ pub struct RecordingSpec {
     /// A walk about the room instead of sitting at the desk (`wander`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub path: Option<Vec<Waypoint>>,
+    /// Where the target lights of the ground truth shine from: the desk's
+    /// screen, as the person's own monitor does, or the dome the light code
+    /// stands for. The person is always filmed at the desk.
+    #[serde(default, skip_serializing_if = "Stage::is_desk")]
+    pub truth_stage: Stage,
 }
 
 /// `wander`'s walk: from the left of the frame to its middle, nearer; to the right
@@ -594,6 +662,7 @@ impl RecordingSpec {
             away,
             display_latency: 0.0,
             path: wander.then(|| WANDER.to_vec()),
+            truth_stage: Stage::Desk,
         })
     }
 
@@ -629,6 +698,9 @@ pub struct RecordedFrame {
 pub struct Recording {
     pub spec: RecordingSpec,
     renderer: Renderer,
+    /// The renderer of the target lights' ground truth when they shine from
+    /// elsewhere than the desk (`RecordingSpec::truth_stage`).
+    truth_renderer: Option<Renderer>,
     look: Look,
     motion: Trajectory,
     playlist: Playlist,
@@ -638,11 +710,19 @@ pub struct Recording {
 
 impl Recording {
     pub fn new(spec: RecordingSpec) -> Result<Recording, String> {
-        let renderer = Renderer::new(Scene::new(
+        let scene = Scene::new(
             Subject::from_seed(spec.subject_seed),
             spec.width,
             spec.height,
-        ))?;
+        );
+        let truth_renderer = match spec.truth_stage {
+            Stage::Desk => None,
+            stage => Some(Renderer::new(Scene {
+                monitor: stage.monitor(),
+                ..scene.clone()
+            })?),
+        };
+        let renderer = Renderer::new(scene)?;
         let seconds = spec.frames as f64 / spec.fps as f64;
         let mut motion = Trajectory::random(
             spec.seed,
@@ -671,6 +751,7 @@ impl Recording {
             look: Look::random(spec.seed, "recording-look"),
             spec,
             renderer,
+            truth_renderer,
             motion,
             playlist,
             targets,
@@ -713,11 +794,25 @@ impl Recording {
         let lit_by = self.monitor_frame((t - self.spec.display_latency).max(0.0));
         let source = light_of(&self.renderer, &lit_by);
         let mut lights = vec![&source];
-        if with_truth {
-            lights.extend(self.targets.iter().map(|(_, _, c)| c));
-        }
+        let targets = self.targets.iter().map(|(_, _, c)| c);
         let transport = self.renderer.prepare(&self.look, &state);
-        let mut imgs = self.renderer.render(&transport, &lights).into_iter();
+        let truth_apart = match &self.truth_renderer {
+            Some(truth) if with_truth => {
+                let transport = truth.prepare(&self.look, &state);
+                truth.render(&transport, &targets.collect::<Vec<_>>())
+            }
+            _ => {
+                if with_truth {
+                    lights.extend(targets);
+                }
+                Vec::new()
+            }
+        };
+        let mut imgs = self
+            .renderer
+            .render(&transport, &lights)
+            .into_iter()
+            .chain(truth_apart);
         let sensor = Sensor::default();
         let lit = imgs.next().unwrap();
         let face = sensor.capture(&lit, self.spec.seed, i as u64);

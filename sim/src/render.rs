@@ -77,6 +77,11 @@ struct CellTable {
     x: Vec<f32>,
     y: Vec<f32>,
     z: Vec<f32>,
+    /// The way each cell faces, scaled by its area over the mean
+    /// (`MonitorGeometry::cell_facing`).
+    facing_x: Vec<f32>,
+    facing_y: Vec<f32>,
+    facing_z: Vec<f32>,
     /// Table slot of cell (row, col), row-major.
     slot: Vec<usize>,
     per_group: usize,
@@ -90,6 +95,9 @@ impl CellTable {
             x: vec![0.0; n],
             y: vec![0.0; n],
             z: vec![0.0; n],
+            facing_x: vec![0.0; n],
+            facing_y: vec![0.0; n],
+            facing_z: vec![0.0; n],
             slot: vec![0; n],
             per_group,
         };
@@ -103,6 +111,8 @@ impl CellTable {
                 t.x[k] = p.x;
                 t.y[k] = p.y;
                 t.z[k] = p.z;
+                let f = m.cell_facing(r, c);
+                (t.facing_x[k], t.facing_y[k], t.facing_z[k]) = (f.x, f.y, f.z);
                 t.slot[r * m.cols + c] = k;
             }
         }
@@ -195,9 +205,11 @@ impl Renderer {
         let mut e = 0.0;
         for k in 0..cells.len() {
             let d = Vec3::new(cells.x[k], cells.y[k], cells.z[k]) - face;
-            let r2 = d.dot(d);
-            let cos_face = d.z.abs() / r2.sqrt();
-            e += cos_face * cos_face / r2;
+            let facing = Vec3::new(cells.facing_x[k], cells.facing_y[k], cells.facing_z[k]);
+            let r = d.dot(d).sqrt();
+            let cos_face = (-d.z).max(0.0) / r;
+            let cos_cell = (-facing.dot(d)).max(0.0) / r;
+            e += cos_face * cos_cell / (r * r);
         }
         let white_irradiance = e * cell_area_over_pi;
         // Fixed exposure: skin of albedo 0.5 facing a white screen reaches about 0.42.
@@ -299,18 +311,20 @@ impl Renderer {
         let cols = (cam.width - 1) / WALL_STEP + 2;
         let rows = (cam.height - 1) / WALL_STEP + 2;
         let group_area_over_pi = self.cell_area_over_pi * self.cells.per_group as f32;
-        let centres: Vec<Vec3> = (0..m.groups()).map(|g| m.group_centre(g)).collect();
+        let centres: Vec<(Vec3, Vec3)> = (0..m.groups())
+            .map(|g| (m.group_centre(g), m.group_facing(g)))
+            .collect();
         let weights = (0..rows * cols)
             .into_par_iter()
             .flat_map_iter(|s| {
                 let (i, j) = (s % cols, s / cols);
                 let p = self.wall_point((i * WALL_STEP) as f32 + 0.5, (j * WALL_STEP) as f32 + 0.5);
                 let probe = p + WALL_NORMAL * 0.002;
-                centres.iter().enumerate().map(move |(g, c)| {
+                centres.iter().enumerate().map(move |(g, (c, facing))| {
                     let d = *c - p;
                     let r2 = d.dot(d);
                     let cos_p = WALL_NORMAL.dot(d).max(0.0);
-                    let cos_m = (-d.z).max(0.0);
+                    let cos_m = (-facing.dot(d)).max(0.0);
                     let vis = maps.get(g).map_or(1.0, |map| map.visibility(probe, 0.01));
                     cos_p * cos_m / (r2 * r2) * group_area_over_pi * vis
                 })
@@ -582,13 +596,20 @@ fn subject_sums(
         .chunks_exact(per)
         .zip(cells.y.chunks_exact(per))
         .zip(cells.z.chunks_exact(per))
+        .zip(cells.facing_x.chunks_exact(per))
+        .zip(
+            cells
+                .facing_y
+                .chunks_exact(per)
+                .zip(cells.facing_z.chunks_exact(per)),
+        )
         .zip(
             s.diffuse
                 .chunks_exact_mut(per)
                 .zip(s.specular.chunks_exact_mut(per)),
         )
         .zip(vis);
-    for ((((xs, ys), zs), (diff, spec)), &v) in runs {
+    for ((((((xs, ys), zs), fxs), (fys, fzs)), (diff, spec)), &v) in runs {
         let scale = area_over_pi * v;
         for k in 0..per {
             let dx = xs[k] - px;
@@ -597,8 +618,9 @@ fn subject_sums(
             let r2 = dx * dx + dy * dy + dz * dz;
             let inv_r = 1.0 / r2.sqrt();
             let ndot = (nx * dx + ny * dy + nz * dz).max(0.0);
-            // The screen faces +z: the cosine at the cell is −dz / r.
-            let mdot = (-dz).max(0.0);
+            // The cosine at the cell is −(facing · d) / r; the facing carries the
+            // cell's area. The screen's cells face +z, which leaves −dz.
+            let mdot = (-(fxs[k] * dx + fys[k] * dy + fzs[k] * dz)).max(0.0);
             let inv_r2 = inv_r * inv_r;
             diff[k] = ndot * mdot * inv_r2 * inv_r2 * scale;
             // Blinn–Phong: (n·h)² with h the half vector of the light direction d/r

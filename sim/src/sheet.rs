@@ -1,34 +1,49 @@
 //! The contact sheet: the simulator's person under a grid of held-out monitor
-//! lights and poses, for people to look at (`deskstage sheet`).
+//! lights and poses, at the desk and then under the dome the light code stands
+//! for, for people to look at (`deskstage sheet`).
 
 use rayon::prelude::*;
 
 use crate::content::{self, Clip};
 use crate::dataset::{heldout_states, still_lights};
 use crate::material::Look;
-use crate::monitor::{CellLight, RgbImage};
+use crate::monitor::{CellLight, MonitorGeometry, RgbImage};
 use crate::render::{Renderer, Scene, Sensor};
 use crate::subject::{State, Subject};
 
-/// The person under a grid of monitor lights (columns) and poses (rows), for people to look at.
+/// Poses of the sheet shown at the desk, and of those the first shown again under the dome.
+const DESK_POSES: usize = 4;
+const DOME_POSES: usize = 2;
+
+/// The person under a grid of monitor lights (columns) and poses (rows), for
+/// people to look at: [`DESK_POSES`] rows lit from the desk's screen, then
+/// [`DOME_POSES`] of them lit by the same pictures from the dome.
 pub fn contact_sheet(subject_seed: u64, cell: usize) -> Result<RgbImage, String> {
-    let r = Renderer::new(Scene::new(Subject::from_seed(subject_seed), cell, cell))?;
+    let scene = Scene::new(Subject::from_seed(subject_seed), cell, cell);
+    let dome = Renderer::new(Scene {
+        monitor: MonitorGeometry::dome(),
+        ..scene.clone()
+    })?;
+    let r = Renderer::new(scene)?;
     let mut clips: Vec<Clip> = content::heldout_clips(subject_seed);
     clips.truncate(6);
     let (shown, cells) = still_lights(&r, &clips);
     let refs: Vec<&CellLight> = cells.iter().collect();
-    let states: Vec<State> = heldout_states().into_iter().take(4).collect();
+    let states: Vec<State> = heldout_states().into_iter().take(DESK_POSES).collect();
+    let rows: Vec<(&Renderer, &State)> = (states.iter().map(|s| (&r, s)))
+        .chain(states.iter().take(DOME_POSES).map(|s| (&dome, s)))
+        .collect();
     let look = Look::default();
     // One extra row on top shows each column's monitor frame.
     let cols = refs.len();
-    let mut sheet = RgbImage::new(cell * cols, cell * (states.len() + 1));
+    let mut sheet = RgbImage::new(cell * cols, cell * (rows.len() + 1));
     for (c, frame) in shown.iter().enumerate() {
         let thumb = resize_area(frame, 0, 0, frame.width, frame.height, cell, cell * 9 / 16);
         paste(&mut sheet, &thumb, c * cell, (cell - thumb.height) / 2);
     }
-    let rendered: Vec<Vec<RgbImage>> = states
+    let rendered: Vec<Vec<RgbImage>> = rows
         .par_iter()
-        .map(|s| {
+        .map(|(r, s)| {
             let t = r.prepare(&look, s);
             r.render(&t, &refs)
                 .iter()

@@ -6,7 +6,7 @@ use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, keypoints}
 use deskstage::io::{Y4mReader, read_npy};
 use deskstage::material::Look;
 use deskstage::math::Vec3;
-use deskstage::monitor::{CellLight, RgbImage};
+use deskstage::monitor::{CellLight, MonitorGeometry, RgbImage};
 use deskstage::render::{LinearImage, Renderer, Scene, Sensor};
 use deskstage::rng::Rng;
 use deskstage::subject::{Expression, Pose, State, Subject};
@@ -138,6 +138,51 @@ fn light_from_one_side_of_the_screen_lights_that_side_of_the_face() {
         "and leaves the other cheek darker"
     );
     assert!(l(&out[0], image_right) > 1.3 * l(&out[0], image_left));
+}
+
+#[test]
+fn the_dome_lights_from_the_side_what_the_screen_lights_from_the_front() {
+    let st = State::default();
+    let desk = renderer(256, 256);
+    let dome = Renderer::new(Scene {
+        monitor: MonitorGeometry::dome(),
+        ..Scene::new(Subject::default(), 256, 256)
+    })
+    .unwrap();
+    let white = light(|_, _| Vec3::new(1.0, 1.0, 1.0));
+    let left_edge = light(|_, c| {
+        if c < COLS / 4 {
+            Vec3::new(1.0, 1.0, 1.0)
+        } else {
+            Vec3::ZERO
+        }
+    });
+    // Per renderer: the subject's left cheek (image right) over the right one
+    // under the grid's left quarter, and the face's middle under white.
+    let measure = |r: &Renderer| {
+        let t = r.prepare(&Look::default(), &st);
+        let out = r.render(&t, &[&left_edge, &white]);
+        let (image_left, image_right) = cheeks(r, &st);
+        let l = |img: &LinearImage, p: (f32, f32)| luminance(img, p.0, p.1, 3);
+        let middle = ((image_left.0 + image_right.0) / 2.0, image_left.1);
+        (
+            l(&out[0], image_right) / l(&out[0], image_left),
+            l(&out[1], middle),
+        )
+    };
+    let ((desk_side, desk_front), (dome_side, dome_front)) = (measure(&desk), measure(&dome));
+    assert!(
+        dome_side > 1.5 * desk_side && dome_side > 3.0,
+        "a light from 45-90 degrees to the side lights one cheek far more than the screen's edge: \
+         {dome_side} on the dome, {desk_side} on the desk"
+    );
+    // The exposure is set so that white on either lights a frontal patch
+    // alike; the nose's middle sees less of the dome, whose light comes from
+    // round the face and is partly shadowed by it (0.71 times the desk's).
+    assert!(
+        (0.6..1.2).contains(&(dome_front / desk_front)),
+        "{dome_front} against {desk_front}"
+    );
 }
 
 #[test]

@@ -43,6 +43,7 @@ class NetConfig:
     code_dim: int = contract.CODE_DIM
     delight: bool = True  # LCFN de-lighting of the skips (lcfn only)
     light_prediction: bool = True  # light decoder and monitor loss (lcfn only)
+    light_field: bool = False  # a map of where the target light falls, drawn into the decoder (lcfn only)
 
     @property
     def widths(self) -> tuple[int, ...]:
@@ -144,6 +145,37 @@ class LightDecoder(nn.Module):
         return self.fuse(self.pool(e2, e4, e6))
 
 
+class LightField(nn.Module):
+    """Where the target light falls on the crop: a coarse map drawn from the light's code
+    and added to the decoder's features at each re-light level.
+
+    AdaIN scales and shifts a channel by the same amount everywhere in the picture, so
+    through it alone a light's code says how bright and what colour the light is but
+    hardly which side of the face it lights. The map says that directly, in the crop's
+    coordinates (the crop rule puts the face at the same place in every crop), and the
+    decoder's convolutions shape it by the face they see. Its outputs start at zero, so a
+    trained network grows one without changing what it does."""
+
+    GRID = 8
+    MAPS = 8
+
+    def __init__(self, code_dim: int, level_chans: tuple[int, ...]):
+        super().__init__()
+        self.draw = nn.Linear(code_dim, self.MAPS * self.GRID * self.GRID)
+        self.inject = nn.ModuleList(nn.Conv2d(self.MAPS, c, 1) for c in level_chans)
+        for conv in self.inject:
+            nn.init.zeros_(conv.weight)
+            nn.init.zeros_(conv.bias)
+
+    def forward(self, code: torch.Tensor) -> torch.Tensor:
+        return act(self.draw(code)).view(-1, self.MAPS, self.GRID, self.GRID)
+
+    def at(self, level: int, field: torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+        """The field's contribution to re-light level ``level`` of size ``like``."""
+        resized = F.interpolate(field, size=like.shape[-2:], mode="bilinear", align_corners=False)
+        return self.inject[level](resized)
+
+
 def up(x: torch.Tensor) -> torch.Tensor:
     return F.interpolate(x, scale_factor=2.0, mode="bilinear", align_corners=False)
 
@@ -152,9 +184,10 @@ class Decoder(nn.Module):
     """The figure's decoder: re-light blocks at each upsampling, 3x3 convs between,
     the two skips of each level concatenated in turn, then the stem and a 7x7 conv.
 
-    With ``code_dim`` zero the re-light blocks are plain convolutions (baselines)."""
+    With ``code_dim`` zero the re-light blocks are plain convolutions (baselines); with
+    ``light_field`` a ``LightField`` adds where the light falls at each re-light block."""
 
-    def __init__(self, w: tuple[int, ...], code_dim: int):
+    def __init__(self, w: tuple[int, ...], code_dim: int, light_field: bool = False):
         super().__init__()
         c0, c1, c2, c3, c4 = w
 
@@ -171,16 +204,21 @@ class Decoder(nn.Module):
         )
         self.last = nn.Conv2d(2 * c1, c0, 3, padding=1)
         self.out = nn.Conv2d(2 * c0, 3, 7, padding=3)
+        self.light_field = LightField(code_dim, (c3, c2, c1)) if light_field and code_dim else None
 
     def forward(self, stem: torch.Tensor, f: list[torch.Tensor], code: torch.Tensor | None) -> torch.Tensor:
-        def rl(block: nn.Module, x: torch.Tensor) -> torch.Tensor:
-            return block(x, code) if isinstance(block, AdaIN) else act(block(x))
+        field = self.light_field(code) if self.light_field is not None and code is not None else None
 
-        x = up(rl(self.relight[0], f[6]))  # bottleneck to level 3
+        def rl(level: int, x: torch.Tensor) -> torch.Tensor:
+            block = self.relight[level]
+            x = block(x, code) if isinstance(block, AdaIN) else act(block(x))
+            return x if field is None else x + self.light_field.at(level, field, x)
+
+        x = up(rl(0, f[6]))  # bottleneck to level 3
         x = act(self.convs[0](torch.cat([f[5], x], 1)))
-        x = up(rl(self.relight[1], torch.cat([f[4], x], 1)))  # level 3 to 2
+        x = up(rl(1, torch.cat([f[4], x], 1)))  # level 3 to 2
         x = act(self.convs[1](torch.cat([f[3], x], 1)))
-        x = up(rl(self.relight[2], torch.cat([f[2], x], 1)))  # level 2 to 1
+        x = up(rl(2, torch.cat([f[2], x], 1)))  # level 2 to 1
         x = act(self.convs[2](torch.cat([f[1], x], 1)))
         x = up(act(self.last(torch.cat([f[0], x], 1))))  # level 1 to full size
         return self.out(torch.cat([stem, x], 1))
@@ -204,7 +242,7 @@ class LcfnNet(nn.Module):
             self.delight = nn.ModuleList(AdaIN(c, c, cfg.code_dim) for c in skip_chans)
         else:
             self.delight = nn.ModuleList(nn.Conv2d(c, c, 3, padding=1) for c in skip_chans)
-        self.decoder = Decoder(w, cfg.code_dim)
+        self.decoder = Decoder(w, cfg.code_dim, cfg.light_field)
 
     def encode(self, image: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
         return self.encoder(image)

@@ -93,7 +93,7 @@ def keypoints_stage(work: Path) -> None:
             np.save(session.joinpath("keypoints.tmp.npy"), kp)
             session.joinpath("keypoints.tmp.npy").replace(path)
         kp = np.load(path)
-        lights = data.read_lights(session, len(kp))
+        lights = data.Capture.load(session).lights()
         pairs = pairing.find_pairs(kp, lights, rule)
         entry = {
             "session": session.name,

@@ -176,6 +176,22 @@ def read_network(path: Path, expected: model.NetConfig | None = None) -> tuple[m
     return cfg, saved["state_dict"]
 
 
+def initial_weights(path: Path, expected: model.NetConfig) -> dict:
+    """The weights of the saved network at ``path`` for a network configured as ``expected``:
+    its own, or with a light field grown onto it (``model.LightField``), whose layers start at
+    zero so that the grown network relights as the saved one did. Raises ``ValueError`` as
+    ``read_network`` does for any other difference."""
+    try:
+        return read_network(path, expected=expected)[1]
+    except ValueError:
+        cfg, state = read_network(path)
+        if cfg.light_field or dataclasses.replace(cfg, light_field=True) != expected:
+            raise
+    grown = model.build(expected).state_dict()
+    grown.update(state)
+    return grown
+
+
 def load_saved_network(path: Path) -> tuple[torch.nn.Module, model.NetConfig]:
     """A saved network, built and in evaluation mode."""
     cfg, state = read_network(path)

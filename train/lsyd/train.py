@@ -30,7 +30,7 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
 from . import data, losses, model, pairing
-from .runs import LossWeights, TrainConfig, hardware, read_config, read_network
+from .runs import LossWeights, TrainConfig, hardware, initial_weights, read_config, read_network
 
 
 def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
@@ -69,7 +69,7 @@ class Trainer:
         self.net = model.build(cfg.net)
         if cfg.init:
             try:
-                self.net.load_state_dict(read_network(Path(cfg.init), expected=cfg.net)[1])
+                self.net.load_state_dict(initial_weights(Path(cfg.init), cfg.net))
             except ValueError as e:
                 raise SystemExit(str(e)) from e
         self.net = self.net.to(device, memory_format=torch.channels_last)
@@ -262,10 +262,17 @@ def record_session(run: Path, device: torch.device, first: int, last: int, secon
 
 
 def init_config(
-    path: Path, arch: str | None, resolution: int | None, width: float | None, no_delight: bool, no_light: bool
+    path: Path,
+    arch: str | None,
+    resolution: int | None,
+    width: float | None,
+    no_delight: bool,
+    no_light: bool,
+    light_field: bool,
 ) -> model.NetConfig:
     """The configuration of the saved network at ``path``; options given on the command line
-    must agree with it (the weights fit only the network they were trained in)."""
+    must agree with it (the weights fit only the network they were trained in), except that
+    ``--light-field`` grows a light field onto a network without one."""
     try:
         cfg, _ = read_network(path)
     except ValueError as e:
@@ -280,7 +287,7 @@ def init_config(
     ]
     if wrong:
         raise SystemExit(f"--init {path}: the saved network's configuration differs: {'; '.join(wrong)}")
-    return cfg
+    return dataclasses.replace(cfg, light_field=True) if light_field else cfg
 
 
 def main() -> None:
@@ -293,6 +300,11 @@ def main() -> None:
     p.add_argument("--init", type=Path, default=None, help="start from this saved network (network.pt)")
     p.add_argument("--no-delight", action="store_true", help="ablation: plain skips instead of LCFN de-lighting")
     p.add_argument("--no-light-prediction", action="store_true", help="ablation: no light decoder or monitor loss")
+    p.add_argument(
+        "--light-field",
+        action="store_true",
+        help="not in the paper: a map of where the target light falls, drawn into the decoder (grown onto --init)",
+    )
     p.add_argument(
         "--monitor-colour",
         type=float,
@@ -341,9 +353,10 @@ def main() -> None:
         width=a.width or 0.25,
         delight=not a.no_delight,
         light_prediction=not a.no_light_prediction,
+        light_field=a.light_field,
     )
     if a.init:
-        net = init_config(a.init, a.arch, a.resolution, a.width, a.no_delight, a.no_light_prediction)
+        net = init_config(a.init, a.arch, a.resolution, a.width, a.no_delight, a.no_light_prediction, a.light_field)
     cfg = TrainConfig(
         net=net,
         steps=a.steps,

@@ -83,3 +83,35 @@ def test_the_weights_average_is_kept_resumed_and_is_the_runs_network(sim_data, t
     last, _ = runs.load_network(run, last_weights=True)
     for k, v in last.state_dict().items():
         assert torch.equal(v, last_weights[-1][k]), k
+
+
+def test_a_light_field_grown_onto_a_trained_network_starts_as_it_was_and_sides_the_light(tmp_path):
+    """``--light-field`` on ``--init``: the grown network relights exactly as the saved one,
+    and its field gives the decoder a different map for a light from the left than from the
+    right, which AdaIN's per-channel scale and shift cannot."""
+    from lsyd import model
+
+    torch.manual_seed(0)
+    cfg = model.NetConfig(resolution=64, width=0.125)
+    saved = model.build(cfg).eval()
+    runs.save_network(saved, cfg, tmp_path / "network.pt", {"test": True})
+    grown_cfg = dataclasses.replace(cfg, light_field=True)
+    grown = model.build(grown_cfg).eval()
+    grown.load_state_dict(runs.initial_weights(tmp_path / "network.pt", grown_cfg))
+    image = torch.rand(2, 3, 64, 64)
+    lights = torch.zeros(2, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
+    lights[0, :, :, :8] = 1.0  # the screen's left quarter
+    lights[1, :, :, -8:] = 1.0  # its right quarter
+    with torch.no_grad():
+        assert torch.equal(saved(image, lights, lights.flip(0))[0], grown(image, lights, lights.flip(0))[0])
+        field = grown.decoder.light_field(grown.light_encoder(lights))
+    assert field.shape == (2, model.LightField.MAPS, model.LightField.GRID, model.LightField.GRID)
+    assert not torch.allclose(field[0], field[1])
+    # Any other difference from the saved network is refused, naming it.
+    other = dataclasses.replace(grown_cfg, width=0.25)
+    try:
+        runs.initial_weights(tmp_path / "network.pt", other)
+    except ValueError as e:
+        assert "width" in str(e)
+    else:
+        raise AssertionError("a network of another width was grown")

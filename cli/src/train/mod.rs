@@ -5,6 +5,7 @@
 //! 1. [`capture`]: read and check the capture folders;
 //! 2. [`prepare`]: decode, follow and crop the face as the element does, attach
 //!    the screen light of each frame, and write the trainer's session format;
+//!    with a few [`rehearsal`] sessions of the simulator's dome beside them;
 //! 3. keypoints and pairing; 4. training (fine-tuning the starter model, or
 //!    from scratch; resumable); 5. export to the model contract: the trainer's
 //!    Python stages ([`python`], `train/lsyd/personal.py`), then the contract
@@ -18,6 +19,7 @@
 mod capture;
 mod prepare;
 mod python;
+mod rehearsal;
 
 use std::ffi::OsString;
 use std::path::{Path, PathBuf};
@@ -227,7 +229,13 @@ fn train(args: &Args, quiet: bool) -> Result<Status, Failure> {
                 fps: args.fps as f64,
                 crop,
             };
-            prepare::run(&captures, &work, settings, &bars)
+            let counts = prepare::run(&captures, &work, settings, &bars)?;
+            let rehearsed = rehearsal::write(&work.join("data/captures"))?;
+            bars.note(&format!(
+                "      and {rehearsed} rehearsal sessions of the simulator's dome, so that the model \
+                 keeps lights from the side"
+            ));
+            Ok(counts)
         },
     )?;
     let (kept, held): (u64, u64) = counts

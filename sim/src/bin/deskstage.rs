@@ -1,9 +1,9 @@
 //! `deskstage`: writes the simulator's datasets, recordings and contact sheet.
 //!
 //! ```text
-//! deskstage captures  --out DIR [--sessions N] [--seconds S] [--fps F] [--seed N] [--subject N]
+//! deskstage captures  --out DIR [--sessions N] [--seconds S] [--fps F] [--seed N] [--subject N] [--stage desk|dome]
 //! deskstage paired    --out DIR [--poses N] [--lights N] [--subject N]
-//! deskstage heldout   --out DIR [--subject N]   (the test set: 9 poses x 9 lights)
+//! deskstage heldout   --out DIR [--subject N] [--stage desk|dome]  (the test set: 9 poses x 9 lights)
 //! deskstage validation --out DIR [--subject N]  (the same for choosing models; never the test set)
 //! deskstage absent    --out DIR [--frames N]   (the empty desk: the person away)
 //! deskstage recording --out DIR --name steady|slow|cuts|walkaway|call [--frames N] [--width W --height H]
@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
-use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, TestSet};
+use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, Stage, TestSet};
 use deskstage::subject::DEFAULT_SUBJECT_SEED;
 
 struct Args {
@@ -157,6 +157,7 @@ fn run(a: &Args) -> Result<(), String> {
         seconds: a.num("seconds", CaptureSpec::default().seconds)?,
         fps: a.num("fps", CaptureSpec::default().fps)?,
         size: a.num("size", dataset::CAPTURE_SIZE)?,
+        stage: Stage::from_name(a.flags.get("stage").map_or("desk", String::as_str))?,
     };
     let io = |e: std::io::Error| e.to_string();
     match a.command.as_str() {
@@ -166,11 +167,17 @@ fn run(a: &Args) -> Result<(), String> {
                 .map_err(io)
         }
         "heldout" => {
-            dataset::write_test_set(&a.out()?, TestSet::Heldout, subject, spec.size).map_err(io)
+            dataset::write_test_set(&a.out()?, TestSet::Heldout, subject, spec.size, spec.stage)
+                .map_err(io)
         }
-        "validation" => {
-            dataset::write_test_set(&a.out()?, TestSet::Validation, subject, spec.size).map_err(io)
-        }
+        "validation" => dataset::write_test_set(
+            &a.out()?,
+            TestSet::Validation,
+            subject,
+            spec.size,
+            spec.stage,
+        )
+        .map_err(io),
         "absent" => dataset::write_absent(&a.out()?, &spec, a.num("frames", 400)?).map_err(io),
         "recording" => {
             let name: String = a.num("name", String::new())?;
@@ -204,7 +211,7 @@ fn run(a: &Args) -> Result<(), String> {
             dataset::write_paired(&out.join("paired"), &spec, a.num("poses", 600)?, 4)
                 .map_err(io)?;
             for set in [TestSet::Heldout, TestSet::Validation] {
-                dataset::write_test_set(&out.join(set.name()), set, subject, spec.size)
+                dataset::write_test_set(&out.join(set.name()), set, subject, spec.size, spec.stage)
                     .map_err(io)?;
             }
             dataset::write_absent(&out.join("absent"), &spec, a.num("absent", 400)?).map_err(io)?;

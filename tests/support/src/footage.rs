@@ -49,6 +49,41 @@ pub fn portrait_720p(media: &Path) -> Result<RgbImage, String> {
     })
 }
 
+/// The face in the 512 x 512 portrait as MediaPipe boxes it
+/// (`models/face/check.json`): its centre and height, in pixels.
+const PORTRAIT_FACE: ([f32; 2], f32) = ([224.5, 129.5], 95.0);
+
+/// A face far from the camera: a 1080p frame of a grey wall with the portrait
+/// shrunk so that its face is `face_fraction` of the frame's height, the face's
+/// centre at `centre` (fractions of the frame's width and height). Returns the
+/// frame and where the face is in it (centre and height, in pixels).
+pub fn small_portrait_1080p(
+    media: &Path,
+    face_fraction: f32,
+    centre: [f32; 2],
+) -> Result<(RgbImage, [f32; 2], f32), String> {
+    let path = media.join("astronaut.png");
+    let portrait = image::open(&path)
+        .map_err(|e| format!("{}: {e} (scripts/setup.sh full fetches it)", path.display()))?
+        .to_rgb8();
+    let (width, height) = (1920u32, 1080u32);
+    let face_height = face_fraction * height as f32;
+    let scale = face_height / PORTRAIT_FACE.1;
+    let side = (portrait.width() as f32 * scale).round() as u32;
+    let small =
+        image::imageops::resize(&portrait, side, side, image::imageops::FilterType::Triangle);
+    let face = [centre[0] * width as f32, centre[1] * height as f32];
+    let corner = [0, 1].map(|k| (face[k] - PORTRAIT_FACE.0[k] * scale).round() as i64);
+    let mut frame = image::RgbImage::from_pixel(width, height, image::Rgb([96, 96, 96]));
+    image::imageops::overlay(&mut frame, &small, corner[0], corner[1]);
+    let frame = RgbImage {
+        width: width as usize,
+        height: height as usize,
+        data: frame.into_raw(),
+    };
+    Ok((frame, face, face_height))
+}
+
 /// Decodes up to `frames` frames of a video, or a still image repeated, as RGB.
 pub fn decode(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
     let still = path.extension().is_some_and(|e| e == "png");

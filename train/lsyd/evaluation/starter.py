@@ -1,9 +1,10 @@
 """Is a model safe on people it never saw? The starter model's test.
 
-    python -m lsyd.evaluation.starter --data data/starter --models models/starter models/default
+    python -m lsyd.evaluation.starter --data data/starter --models models/starter models/default [--stage dome]
 
 For each simulated person in ``DATA/unseen`` (held-out sets of 9 poses x 9 lights of
-people no model trained on), every ordered light pair is relit and put back with
+people no model trained on; ``DATA/unseen-dome`` with ``--stage dome``, the same lit from the
+dome the light code stands for), every ordered light pair is relit and put back with
 the element's transfer, and scored on the face crop against exact ground truth
 (RMSE on 0-255). Beside each model, with the source light known and predicted:
 
@@ -14,7 +15,7 @@ the element's transfer, and scored on the face crop against exact ground truth
 
 A model is safe on strangers when it beats the oracle gain with the monitor known,
 and is never worse than the input with it unknown. Writes ``OUT/starter.json`` and
-``OUT/starter.md``.
+``OUT/starter.md`` (``starter-dome.*`` for the dome).
 """
 
 from __future__ import annotations
@@ -75,7 +76,7 @@ def markdown(result: dict) -> str:
     lines = [
         f"Face-crop RMSE (0-255) on {len(result['people'])} simulated people no model trained on "
         f"(seeds {', '.join(str(p) for p in result['people'])}), every ordered pair of 9 lights "
-        "in 9 poses each. Command: `python -m lsyd.evaluation.starter`.",
+        f"in 9 poses each, lit from the {result['stage']}. Command: `{result['command']}`.",
         "",
         "| person | input | oracle gain | " + " | ".join(f"{n} known | {n} predicted" for n in names) + " |",
         "|---|---|---|" + "---|---|" * len(names),
@@ -94,11 +95,14 @@ def main() -> None:
     p.add_argument("--data", type=Path, default=ROOT / "data" / "starter")
     p.add_argument("--models", type=Path, nargs="+", default=[ROOT / "models" / "starter", ROOT / "models" / "default"])
     p.add_argument("--out", type=Path, default=ROOT / "results" / "starter")
+    p.add_argument("--stage", default="desk", choices=["desk", "dome"], help="where the held-out lights shine from")
     a = p.parse_args()
 
-    people = sorted((a.data / "unseen").glob("person-*"), key=lambda d: int(d.name.split("-")[1]))
+    suffix = "" if a.stage == "desk" else f"-{a.stage}"
+    unseen = a.data / f"unseen{suffix}"
+    people = sorted(unseen.glob("person-*"), key=lambda d: int(d.name.split("-")[1]))
     if not people:
-        raise SystemExit(f"no held-out people under {a.data / 'unseen'}: run scripts/train-starter.sh")
+        raise SystemExit(f"no held-out people under {unseen}: run scripts/train-starter.sh")
     names = [m.name for m in a.models]
     per_person: dict[str, dict] = {}
     for folder in people:
@@ -113,15 +117,16 @@ def main() -> None:
     for n in names:
         mean[n] = {m: float(np.mean([r[n][m] for r in rows])) for m in ("known", "predicted")}
     result = {
-        "command": "python -m lsyd.evaluation.starter",
+        "command": "python -m lsyd.evaluation.starter" + (f" --stage {a.stage}" if suffix else ""),
+        "stage": a.stage,
         "people": [int(f.name.split("-")[1]) for f in people],
         "models": names,
         "per_person": per_person,
         "mean": mean,
     }
     a.out.mkdir(parents=True, exist_ok=True)
-    (a.out / "starter.json").write_text(json.dumps(result, indent=2) + "\n")
-    (a.out / "starter.md").write_text(markdown(result))
+    (a.out / f"starter{suffix}.json").write_text(json.dumps(result, indent=2) + "\n")
+    (a.out / f"starter{suffix}.md").write_text(markdown(result))
     print(markdown(result))
 
 

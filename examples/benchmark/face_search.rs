@@ -1,0 +1,88 @@
+//! `--face-search`: what looking for small faces costs the face detector at
+//! 1080p, against the whole frame alone (the detector before it looked
+//! further), in interleaved rounds.
+//!
+//! Three frames: a grey wall with nobody (the scan of tiles runs), the
+//! portrait with its face a tenth of the height off centre (found, then looked
+//! for again round where it was), and the portrait filling the height (the
+//! whole frame finds it; nothing more runs). Each is detected `REPEATS` times a
+//! round; the table gives the median milliseconds a detection and, at the
+//! tracker's default interval, a frame.
+
+use std::fmt::Write as _;
+use std::time::Instant;
+
+use gstlsydrelight::engine::environment;
+use gstlsydrelight::face::{FaceDetector, TrackerSettings};
+use gstlsydrelight::frame::Frame;
+use gstlsydrelight::paths::{default_face_detector, default_ort_library};
+use lsydrelight_testkit::checkout;
+use lsydrelight_testkit::footage::small_portrait_1080p;
+
+/// Detections timed per frame and round.
+const REPEATS: usize = 20;
+
+fn median_min_max(mut v: Vec<f64>) -> (f64, f64, f64) {
+    v.sort_by(f64::total_cmp);
+    (v[v.len() / 2], v[0], v[v.len() - 1])
+}
+
+pub(crate) fn face_search(rounds: usize) -> Result<String, String> {
+    let media = checkout().join("target/real-media");
+    let env = environment(&default_ort_library()).map_err(|e| e.to_string())?;
+    let detector =
+        || FaceDetector::new(env, &default_face_detector(), 1).map_err(|e| e.to_string());
+    let (small, ..) = small_portrait_1080p(&media, 0.10, [0.8, 0.3])?;
+    let (large, ..) = small_portrait_1080p(&media, 0.45, [0.5, 0.45])?;
+    let mut nobody = small.clone();
+    nobody.data.fill(96);
+    let frames = [
+        ("nobody", &nobody),
+        ("a face 10% of the height", &small),
+        ("a face 45% of the height", &large),
+    ];
+    // Per frame: milliseconds a detection, the whole frame alone and with the search.
+    let mut times: Vec<[Vec<f64>; 2]> = frames.iter().map(|_| [Vec::new(), Vec::new()]).collect();
+    for _ in 0..rounds {
+        for ((_, img), t) in frames.iter().zip(&mut times) {
+            let frame = Frame::packed_rgb(&img.data, img.width, img.height);
+            let (mut whole, mut searching) = (detector()?, detector()?);
+            // Found once first, as the tracker would have it.
+            searching.detect(&frame).map_err(|e| e.to_string())?;
+            for _ in 0..REPEATS {
+                let start = Instant::now();
+                whole
+                    .detect_whole_frame(&frame)
+                    .map_err(|e| e.to_string())?;
+                t[0].push(start.elapsed().as_secs_f64() * 1e3);
+                let start = Instant::now();
+                searching.detect(&frame).map_err(|e| e.to_string())?;
+                t[1].push(start.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+    }
+    let interval = TrackerSettings::default().detect_interval as f64;
+    let mut md = String::new();
+    let _ = writeln!(
+        md,
+        "Made by `cargo run --release --example benchmark -- --face-search --rounds {rounds}`: \
+         1920 x 1080 RGB, one thread, {REPEATS} detections a frame in each of {rounds} interleaved rounds; \
+         median (min-max) ms. A frame's share is a detection's over the tracker's interval of {interval} frames.\n"
+    );
+    let _ = writeln!(
+        md,
+        "| frame | whole frame alone, ms a detection | with the search | ratio | with the search, ms a frame |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|");
+    for ((name, _), [alone, search]) in frames.iter().zip(times) {
+        let (a, a_lo, a_hi) = median_min_max(alone);
+        let (s, s_lo, s_hi) = median_min_max(search);
+        let _ = writeln!(
+            md,
+            "| {name} | {a:.2} ({a_lo:.2}-{a_hi:.2}) | {s:.2} ({s_lo:.2}-{s_hi:.2}) | {:.2}x | {:.2} |",
+            s / a,
+            s / interval
+        );
+    }
+    Ok(md)
+}
