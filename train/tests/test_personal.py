@@ -115,10 +115,10 @@ def test_training_from_a_saved_network_starts_from_its_weights_and_resumes(tmp_p
 def test_init_options_must_agree_with_the_saved_network(tmp_path):
     network = tmp_path / "network.pt"
     runs.save_network(model.build(TINY), TINY, network, {})
-    assert train.init_config(network, None, None, None, False, False) == TINY
-    assert train.init_config(network, "lcfn", 32, 0.125, False, False) == TINY
+    assert train.init_config(network, None, None, None, False, False, False) == TINY
+    assert train.init_config(network, "lcfn", 32, 0.125, False, False, False) == TINY
     with pytest.raises(SystemExit, match="--resolution 96 \\(the network has 32\\)"):
-        train.init_config(network, None, 96, None, False, False)
+        train.init_config(network, None, 96, None, False, False, False)
 
 
 def test_pose_spread_measures_roll_and_face_size():
