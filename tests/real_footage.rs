@@ -15,9 +15,9 @@ use std::path::PathBuf;
 use deskstage::monitor::RgbImage;
 use lsydrelight_testkit::{
     checkout,
-    direction::light_shape,
+    direction::{LightShape, light_shape},
     footage::{
-        Format, decode, denoised, portrait_720p, read_y4m, relight, relight_with,
+        Format, Relit, decode, denoised, portrait_720p, read_y4m, relight, relight_with,
         small_portrait_1080p, through,
     },
     init,
@@ -247,30 +247,7 @@ fn a_real_portrait_relit_to_neon_changes_visibly() {
         return;
     };
     let folder = path.parent().expect("the media folder");
-    let frames = vec![portrait_720p(folder).unwrap(); 8];
-    let model = gstlsydrelight::paths::default_model();
-    let relit = relight_with(
-        &frames,
-        &model,
-        "target-preset=neon target-transition=0",
-        Format::Rgb,
-    )
-    .unwrap();
-    let (output, shown) = relit.last().unwrap();
-    let face = shown
-        .expect("the portrait's face is found")
-        .region
-        .face_within();
-    let input = denoised(
-        &through(&frames, Format::Rgb).unwrap(),
-        &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
-    )
-    .unwrap();
-    let shape = light_shape(
-        &View::pixels(input.last().unwrap().frame()),
-        &View::pixels(output.frame()),
-        face,
-    );
+    let (_, shape) = relit_to_neon(&vec![portrait_720p(folder).unwrap(); 8]);
     assert!(shape.strength > 9.0, "{shape:?}");
     assert!(shape.asymmetry.abs() < shape.strength, "{shape:?}");
 }
@@ -287,17 +264,7 @@ fn a_small_face_off_centre_in_1080p_is_found_and_relit() {
     };
     let folder = path.parent().expect("the media folder");
     let (frame, face, height) = small_portrait_1080p(folder, 0.10, [0.8, 0.3]).unwrap();
-    let frames = vec![frame; 60];
-    let model = gstlsydrelight::paths::default_model();
-    let relit = relight_with(
-        &frames,
-        &model,
-        "target-preset=neon target-transition=0",
-        Format::Rgb,
-    )
-    .unwrap();
-    let (output, shown) = relit.last().unwrap();
-    let shown = shown.expect("the small face is found and relit");
+    let (shown, shape) = relit_to_neon(&vec![frame; 60]);
     let region = shown.region.face_within();
     let centre = [region.x, region.y].map(|c| (c + region.size / 2) as f32);
     assert!(
@@ -308,15 +275,32 @@ fn a_small_face_off_centre_in_1080p_is_found_and_relit() {
         shown.shown.is_some_and(|(strength, _)| strength > 0.99),
         "{shown:?}"
     );
+    assert!(shape.strength > 5.0, "{shape:?}");
+}
+
+/// `frames` relit to `neon` by the element with the default model, fed RGB: how
+/// the element showed the last frame's face, and the shape of the change there
+/// against the input as the element's denoising saw it.
+fn relit_to_neon(frames: &[RgbImage]) -> (Relit, LightShape) {
+    let model = gstlsydrelight::paths::default_model();
+    let relit = relight_with(
+        frames,
+        &model,
+        "target-preset=neon target-transition=0",
+        Format::Rgb,
+    )
+    .unwrap();
+    let (output, shown) = relit.last().unwrap();
+    let shown = shown.expect("the face is found and relit");
     let input = denoised(
-        &through(&frames, Format::Rgb).unwrap(),
+        &through(frames, Format::Rgb).unwrap(),
         &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
     )
     .unwrap();
     let shape = light_shape(
         &View::pixels(input.last().unwrap().frame()),
         &View::pixels(output.frame()),
-        region,
+        shown.region.face_within(),
     );
-    assert!(shape.strength > 5.0, "{shape:?}");
+    (shown, shape)
 }

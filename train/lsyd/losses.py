@@ -96,6 +96,21 @@ def change_l1(src: torch.Tensor, relit: torch.Tensor, tgt: torch.Tensor) -> torc
     return F.l1_loss(lighting_change(src, relit), lighting_change(src, tgt))
 
 
+# Side, in pixels of the network's image, of the cells the coarse change is averaged over:
+# a quarter of a face 33 px across, so a cell tells one side of the face from the other.
+COARSE_CELL = 8
+
+
+def coarse_change_l1(src: torch.Tensor, relit: torch.Tensor, tgt: torch.Tensor) -> torch.Tensor:
+    """L1 between the relit and the target image's lighting changes averaged over cells of
+    ``COARSE_CELL`` pixels: which side of the face a light brightens, and by how much. In
+    ``change_l1`` this part is a small share of every pixel's error, and a network trained on
+    it alone learnt a light's side slowly (docs/training.md)."""
+    return F.l1_loss(
+        F.avg_pool2d(lighting_change(src, relit), COARSE_CELL), F.avg_pool2d(lighting_change(src, tgt), COARSE_CELL)
+    )
+
+
 def monitor_match(pred: torch.Tensor, light: torch.Tensor, l1: float, perceptual: float, colour: float) -> torch.Tensor:
     """How far a predicted monitor light is from the true one: L1, the gradient L1 as its
     perceptual term, and L1 between the two screens' mean colours, each at its weight."""

@@ -56,6 +56,9 @@ class LossWeights:
     # (losses.change_l1), the part of the output the element pastes. With the image losses
     # alone a key from the left and one from the right change a face nearly alike.
     change: float = 0.0
+    # Not in the paper: the same L1 on the changes averaged over 8 px cells
+    # (losses.coarse_change_l1): which side of the face a light brightens.
+    coarse_change: float = 0.0
 
 
 @dataclasses.dataclass(frozen=True)

@@ -125,6 +125,9 @@ class Trainer:
         if w.change:
             terms["change"] = losses.change_l1(src, relit, tgt)
             g_loss = g_loss + w.change * terms["change"]
+        if w.coarse_change:
+            terms["coarse_change"] = losses.coarse_change_l1(src, relit, tgt)
+            g_loss = g_loss + w.coarse_change * terms["coarse_change"]
         if pred_src is not None:
             terms["monitor"] = losses.monitor_match(
                 pred_src, l_src, w.l1, w.perceptual, w.monitor_colour
@@ -208,7 +211,20 @@ def train(
         raise SystemExit(f"{ckpt} exists: pass --resume to continue it, or choose another --out")
 
     log_path = run / "log.csv"
-    fields = ["step", "seconds", "g", "d", "l1", "perceptual", "cycle", "adversarial", "monitor", "delit", "change"]
+    fields = [
+        "step",
+        "seconds",
+        "g",
+        "d",
+        "l1",
+        "perceptual",
+        "cycle",
+        "adversarial",
+        "monitor",
+        "delit",
+        "change",
+        "coarse_change",
+    ]
     # Rows logged after the checkpoint we resume from are trained again; keep them once.
     kept = []
     if resume and log_path.exists():
@@ -323,6 +339,12 @@ def main() -> None:
         default=LossWeights.change,
         help="not in the paper: weight of the L1 between the relit and target images' smooth lighting changes",
     )
+    p.add_argument(
+        "--coarse-change",
+        type=float,
+        default=LossWeights.coarse_change,
+        help="not in the paper: weight of the L1 between the two lighting changes averaged over 8 px cells",
+    )
     p.add_argument("--steps", type=int, default=TrainConfig.steps)
     p.add_argument("--batch", type=int, default=TrainConfig.batch)
     p.add_argument("--lr", type=float, default=TrainConfig.lr)
@@ -365,7 +387,12 @@ def main() -> None:
         seed=a.seed,
         pairs=a.pairs,
         pairing=pairing.PairingRule(max_keypoint_distance=a.max_keypoint_distance),
-        weights=LossWeights(delit_consistency=a.delit_consistency, monitor_colour=a.monitor_colour, change=a.change),
+        weights=LossWeights(
+            delit_consistency=a.delit_consistency,
+            monitor_colour=a.monitor_colour,
+            change=a.change,
+            coarse_change=a.coarse_change,
+        ),
         init=str(a.init.resolve()) if a.init else None,
         weight_average=a.weight_average,
     )

@@ -5,13 +5,14 @@ import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
-from lsyd.evaluation import evaluate
+from lsyd.evaluation import direction, evaluate
 
-COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound")
+COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound", "direction")
 
 
 def python(*args: str) -> str:
@@ -75,3 +76,36 @@ def test_seeds_names_a_missing_row(tmp_path):
         text=True,
     )
     assert out.returncode != 0 and "seed 2: no row 'Sengupta et al. 2021 (source given)'" in out.stderr
+
+
+def test_direction_reads_the_side_a_change_brightens():
+    # Keypoints spanning the middle of a 64 px image, nose at its centre; a change that
+    # brightens the image's right (the person's left) reads as a positive asymmetry.
+    keypoints = np.zeros((68, 2))
+    keypoints[:, 0] = np.linspace(16, 48, 68)
+    keypoints[:, 1] = np.linspace(16, 48, 68)
+    keypoints[direction.NOSE_TIP] = (32, 32)
+    left, right = direction.face_halves(keypoints, 64, 1.0)
+    before = np.full((64, 64, 3), 100.0)
+    after = before.copy()
+    after[:, 33:] *= 1.5
+    asymmetry, strength = direction.measure(direction.log_change(before, after), left, right)
+    assert asymmetry > 30 and strength > 20
+    mirrored, _ = direction.measure(direction.log_change(before, after[:, ::-1]), left, right)
+    assert mirrored < -30
+
+
+def test_direction_summary_scores_a_right_model_one_and_a_side_blind_one_zero():
+    rng = np.random.default_rng(0)
+    truth = rng.normal(0, 10, 8 * 4).tolist()
+    strength = [5.0] * len(truth)
+    right = direction.summary(
+        {"truth_asym": truth, "model_asym": truth, "truth_strength": strength, "model_strength": strength}, 4
+    )
+    assert right["slope"] == pytest.approx(1) and right["target_slope"] == pytest.approx(1)
+    # A model whose change's side is set by the source alone: the same for every target.
+    by_source = np.repeat(np.array(truth).reshape(-1, 4).mean(1), 4).tolist()
+    blind = direction.summary(
+        {"truth_asym": truth, "model_asym": by_source, "truth_strength": strength, "model_strength": strength}, 4
+    )
+    assert blind["target_slope"] == pytest.approx(0, abs=1e-6)

@@ -43,3 +43,18 @@ def test_the_change_loss_stays_finite_where_the_network_goes_below_black():
     loss = losses.change_l1(src, below, src)
     loss.backward()
     assert torch.isfinite(loss) and torch.isfinite(relit.grad).all()
+
+
+def test_the_coarse_change_loss_keeps_the_side_and_drops_pixel_noise():
+    # The side's error is as large averaged over 8 px cells as pixel by pixel; noise in
+    # the relit image's change (the mottling the element must not paste) mostly cancels.
+    src = _face()
+    left, right = _lit_from(src, "left"), _lit_from(src, "right")
+    noisy = left * torch.exp(0.6 * torch.randn(src.shape, generator=torch.Generator().manual_seed(2)))
+    assert losses.coarse_change_l1(src, left, left).item() == 0.0
+
+    def coarse_share(relit: torch.Tensor) -> float:
+        return losses.coarse_change_l1(src, relit, left).item() / losses.change_l1(src, relit, left).item()
+
+    assert coarse_share(right) > 0.95
+    assert coarse_share(noisy) < 0.7
