@@ -4,7 +4,8 @@
 
 For each simulated person no model trained on (``DATA/unseen-dome``: 9 poses x 9 lights
 from the dome the light code stands for; ``DATA/unseen`` with ``--stage desk``), every ordered
-light pair is relit with the source light known, and the face's change is read on the
+light pair is relit with the source light known (or, with ``--source predicted``, predicted from
+the face as without a monitor stream), and the face's change is read on the
 network's crop, before the element's paste, so that this measures the network alone:
 
 - asymmetry: the mean of 100 ln((Y_out + 2) / (Y_in + 2)) (Y luma in 0-255) over the face's
@@ -15,7 +16,7 @@ network's crop, before the element's paste, so that this measures the network al
 The truth's asymmetry and strength come from the same measure on the exact clean frames. The
 summary is the least-squares slope of the model's asymmetry on the truth's (1 means the side and
 the size are right, 0 that the side is ignored, negative that it is mirrored), their correlation,
-and the ratio of strengths. Writes ``OUT/direction[-STAGE].json`` and ``.md``.
+and the ratio of strengths. Writes ``OUT/direction[-STAGE][-predicted].json`` and ``.md``.
 """
 
 from __future__ import annotations
@@ -56,7 +57,7 @@ def measure(change: np.ndarray, left: np.ndarray, right: np.ndarray) -> tuple[fl
     return float(change[left].mean() - change[right].mean()), float(np.sqrt((change[face] ** 2).mean()))
 
 
-def score(folder: Path, held: data.Heldout, keypoints: np.ndarray) -> dict[str, list[float]]:
+def score(folder: Path, held: data.Heldout, keypoints: np.ndarray, predicted: bool) -> dict[str, list[float]]:
     chain = contract.StageChain(folder, 2)
     r = chain.resolution
     codes = [chain.light_code(held.lights[j][None]) for j in range(held.lights.shape[0])]
@@ -68,10 +69,11 @@ def score(folder: Path, held: data.Heldout, keypoints: np.ndarray) -> dict[str, 
         left, right = face_halves(keypoints[p], r, held.images.shape[2] / r)
         for i in range(n_light):
             x = np.ascontiguousarray(small[p, i].transpose(2, 0, 1) / 255.0)[None]
+            source = chain.predict_light(x) if predicted else held.lights[i][None]
             for j in range(n_light):
                 if j == i:
                     continue
-                relit = np.clip(chain.relight(x, held.lights[i][None], codes[j])[0], 0, 1).transpose(1, 2, 0) * 255.0
+                relit = np.clip(chain.relight(x, source, codes[j])[0], 0, 1).transpose(1, 2, 0) * 255.0
                 ta, ts = measure(log_change(clean[p, i], clean[p, j]), left, right)
                 ma, ms = measure(log_change(small[p, i], relit), left, right)
                 out["truth_asym"].append(ta)
@@ -113,7 +115,8 @@ def markdown(result: dict) -> str:
     lines = [
         f"The face's left-minus-right change (points of 100 ln luma) of every ordered pair of 9 lights "
         f"in 9 poses, {len(result['people'])} simulated people no model trained on, lit from the "
-        f"{result['stage']}; the network's crop against exact truth. Command: `{result['command']}`.",
+        f"{result['stage']}, the source light {result['source']}; the network's crop against exact truth. "
+        f"Command: `{result['command']}`.",
         "",
         "| model | slope on truth | correlation | target's slope | target's correlation | asymmetry RMS (truth) "
         "| asymmetry RMS (model) | strength / truth's |",
@@ -135,10 +138,18 @@ def main() -> None:
     p.add_argument("--out", type=Path, default=ROOT / "results" / "starter")
     p.add_argument("--stage", default="dome", choices=["desk", "dome"], help="where the held-out lights shine from")
     p.add_argument("--people", type=int, default=8, help="how many of the held-out people to score")
+    p.add_argument(
+        "--source",
+        default="known",
+        choices=["known", "predicted"],
+        help="the source light as the monitor showed it, or predicted from the face (no monitor stream)",
+    )
     a = p.parse_args()
 
-    suffix = "" if a.stage == "desk" else f"-{a.stage}"
-    unseen = a.data / f"unseen{suffix}"
+    predicted = a.source == "predicted"
+    stage_suffix = "" if a.stage == "desk" else f"-{a.stage}"
+    suffix = stage_suffix + ("-predicted" if predicted else "")
+    unseen = a.data / f"unseen{stage_suffix}"
     people = sorted(unseen.glob("person-*"), key=lambda d: int(d.name.split("-")[1]))[: a.people]
     if not people:
         raise SystemExit(f"no held-out people under {unseen}: run scripts/train-starter.sh")
@@ -149,12 +160,13 @@ def main() -> None:
         targets = held.lights.shape[0] - 1
         keypoints = np.load(folder / "keypoints.npy")
         for model in a.models:
-            for k, v in score(model, held, keypoints).items():
+            for k, v in score(model, held, keypoints, predicted).items():
                 scores[model.name].setdefault(k, []).extend(v)
         print(folder.name, {m: summary(s, targets)["target_slope"] for m, s in scores.items()})
     result = {
-        "command": f"python -m lsyd.evaluation.direction --stage {a.stage} --people {a.people}",
+        "command": f"python -m lsyd.evaluation.direction --stage {a.stage} --people {a.people} --source {a.source}",
         "stage": a.stage,
+        "source": a.source,
         "people": [int(f.name.split("-")[1]) for f in people],
         "models": {name: summary(s, targets) for name, s in scores.items()},
     }
