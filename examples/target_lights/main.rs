@@ -56,7 +56,8 @@ enum Command {
         /// Frames of the `call` recording.
         #[arg(long, default_value_t = 60)]
         frames: usize,
-        /// The model folder (default: the element's default model).
+        /// The model folder (default: models/default, the shipped call's person's
+        /// own model; the element's own default is models/starter).
         #[arg(long)]
         model: Option<PathBuf>,
         /// Where the truth's target lights shine from: `desk` (the screen) or
