@@ -9,10 +9,12 @@
 # lights from up to 90 degrees to each side; docs/simulator.md), which teaches which side
 # a light comes from. Pairs are found by facial keypoints within each session, as on real
 # captures. People 200-207 are never trained on: their held-out sets (9 poses x 9 lights,
-# on the desk and under the dome) measure the model on strangers. Training has two
-# stages, both with the light field (a map of where the target light falls, drawn into
+# on the desk and under the dome) measure the model on strangers. Training has three
+# stages, all with the light field (a map of where the target light falls, drawn into
 # the decoder): the paper's losses (with the de-lit consistency and monitor colour
-# terms) for 3000 steps, then 1500 more with the lighting-change loss (docs/training.md).
+# terms) for 3000 steps, 6000 more from those weights (a second cosine schedule), then
+# 1500 more with the lighting-change loss (docs/training.md). This makes
+# models/starter-next; the shipped models/starter is the older two-stage recipe.
 # Every step is skipped when its output exists, so the script resumes where it stopped.
 # Personal models fine-tune from this one.
 set -euo pipefail
@@ -54,6 +56,16 @@ if [ ! -f "$run/done" ]; then
     --resolution 96 --light-field --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
   touch "$run/done"
 fi
+long_run="$run-long"
+if [ ! -f "$long_run/done" ]; then
+  [ -f "$run/network.pt" ] || (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out "../$run/network.pt")
+  resume=()
+  [ -f "$long_run/checkpoint.pt" ] && resume=(--resume)
+  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$long_run" --steps 6000 \
+    --init "../$run/network.pt" --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
+  touch "$long_run/done"
+fi
+run=$long_run
 change_run="$run-change"
 if [ ! -f "$change_run/done" ]; then
   [ -f "$run/network.pt" ] || (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out "../$run/network.pt")
@@ -68,7 +80,7 @@ run=$change_run
 # Export: the contract's stages (checked against PyTorch on a stranger's held-out frames),
 # the saved network personal models fine-tune from, and the test on strangers.
 [ -e "$data/heldout" ] || ln -s unseen/person-200 "$data/heldout"
-(cd train && ../.venv/bin/python -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter --name starter)
-(cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out ../models/starter/network.pt)
-(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data")
-(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data" --stage dome)
+(cd train && ../.venv/bin/python -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter-next --name starter-next)
+(cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out ../models/starter-next/network.pt)
+(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data" --models ../models/starter ../models/starter-next)
+(cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data" --models ../models/starter ../models/starter-next --stage dome)

@@ -5,6 +5,7 @@ use deskstage::math::Vec3;
 use deskstage::subject::{Pose, State};
 use gst::prelude::*;
 use gst_check::Harness;
+use gstlsydrelight::targets::Preset;
 use lsydrelight_testkit::{
     element::{element, monitor_time, stat},
     init,
@@ -195,6 +196,44 @@ fn relights_without_a_monitor_stream() {
         3,
         "unknown-source mode always predicts"
     );
+}
+
+/// `source-preset` states the light the face is lit by when no monitor stream is
+/// connected: it stands in for the monitor's light (nothing is predicted), the
+/// relighting differs from the predicted light's, and a target equal to it
+/// passes the face unchanged.
+#[test]
+fn a_stated_source_light_stands_in_for_a_missing_monitor_stream() {
+    let relit_from = |source: Preset, target: Preset| {
+        let (e, mut h) = face_harness(gst_video::VideoFormat::Rgb);
+        e.set_property("reuse-interval", 1u32);
+        e.set_property("target-transition", 0u64);
+        e.set_property("source-preset", source);
+        e.set_property("target-preset", target);
+        let c = caps(gst_video::VideoFormat::Rgb, FACE_W, FACE_H, 30);
+        let mut out = None;
+        for i in 0..3 {
+            h.push(buffer(face_rgb(), &c, frame_time(i), FRAME))
+                .unwrap();
+            out = Some(to_rgb(&h.pull().unwrap(), &c));
+        }
+        (e, out.unwrap())
+    };
+    // The tests' person is lit by a white screen, which the network predicts;
+    // neon is far from it.
+    let (e, stated) = relit_from(Preset::Neon, Preset::WarmKeyLeft);
+    assert_eq!(stat(&e, "assumed-source"), 3);
+    assert_eq!(stat(&e, "known-source"), 3);
+    assert_eq!(stat(&e, "predicted-source"), 0);
+    assert_eq!(stat(&e, "light-predictions"), 0, "nothing to predict");
+    let (_, predicted) = relit_from(Preset::None, Preset::WarmKeyLeft);
+    assert!(
+        mean_abs_diff(&stated, &predicted) > 1.0,
+        "the stated light is the one relit from"
+    );
+    let (e, same) = relit_from(Preset::SoftFront, Preset::SoftFront);
+    assert_eq!(&same, face_rgb(), "relit to the light it is lit by");
+    assert_eq!(stat(&e, "skipped-same-light"), 3);
 }
 
 #[test]

@@ -8,10 +8,11 @@
 //! changes, `<out>/<clip>-change.png` (grey for none, lighter for brighter).
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use deskstage::dataset::Stage;
 use deskstage::monitor::RgbImage;
+use gst::prelude::*;
 use gstlsydrelight::frame::OwnedFrame;
 use gstlsydrelight::targets::Preset;
 use lsydrelight_testkit::{
@@ -72,15 +73,49 @@ fn relit_at_full_strength<'a>(
     })
 }
 
-/// `frames` relit by `model` to `preset` and measured against the input as
+/// The element as measured: its model, and its `source-preset` where it is not
+/// the element's default.
+pub struct Setup {
+    pub model: PathBuf,
+    pub source_preset: Option<Preset>,
+}
+
+impl Setup {
+    fn properties(&self, target: Preset) -> String {
+        let source = (self.source_preset)
+            .map(|p| format!(" source-preset={}", p.nick()))
+            .unwrap_or_default();
+        format!(
+            "target-preset={} target-transition=0{source}",
+            target.nick()
+        )
+    }
+
+    /// The source light the element assumes without a monitor stream
+    /// (`Preset::None`: it predicts one).
+    fn source(&self) -> Result<Preset, String> {
+        match self.source_preset {
+            Some(p) => Ok(p),
+            None => gst::ElementFactory::make("lsydrelight")
+                .build()
+                .map(|e| e.property::<Preset>("source-preset"))
+                .map_err(|e| format!("lsydrelight: {e}")),
+        }
+    }
+
+    fn describe(&self) -> String {
+        let model = self.model.strip_prefix(checkout()).unwrap_or(&self.model);
+        match self.source_preset {
+            Some(p) => format!("`{}` and `source-preset={}`", model.display(), p.nick()),
+            None => format!("`{}`", model.display()),
+        }
+    }
+}
+
+/// `frames` relit by the `setup`'s element to `preset` and measured against the input as
 /// the element's denoising left it (so that the change measured is the light's).
-fn relight(frames: &[RgbImage], model: &Path, preset: Preset) -> Result<Relighting, String> {
-    let relit = relight_with(
-        frames,
-        model,
-        &format!("target-preset={} target-transition=0", preset.nick()),
-        Format::Rgb,
-    )?;
+fn relight(frames: &[RgbImage], setup: &Setup, preset: Preset) -> Result<Relighting, String> {
+    let relit = relight_with(frames, &setup.model, &setup.properties(preset), Format::Rgb)?;
     let regions: Vec<Option<Relit>> = relit.iter().map(|(_, r)| *r).collect();
     let input = denoised(&through(frames, Format::Rgb)?, &regions)?;
     let (mut faces, mut shapes, mut mottles) = (Vec::new(), Vec::new(), Vec::new());
@@ -168,7 +203,7 @@ fn sheet(images: &[&RgbImage], square: Option<Region>, height: u32) -> image::Rg
 }
 
 /// The report: real footage, then the simulator against its truth.
-pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(), String> {
+pub fn report(frames: usize, setup: &Setup, out: &Path, stage: Stage) -> Result<(), String> {
     init();
     std::fs::create_dir_all(out).map_err(|e| format!("{}: {e}", out.display()))?;
     let media = checkout().join("target/real-media");
@@ -181,7 +216,7 @@ pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(
     let _ = writeln!(
         md,
         "Made by `cargo run --release --example target_lights -- direction --frames {frames} --stage {}` \
-         with `{}` and the element's other defaults, fed RGB, with no monitor stream.\n\n\
+         with {} and the element's other defaults, fed RGB, with no monitor stream.\n\n\
          Strength: RMS over the face of 100 ln((out + 10) / (in + 10)), luma in levels, in %. \
          Key swap: the face's image-left less image-right mean change under warm-key-left, \
          less the same under cool-key-right, in %. Box edge: the largest \
@@ -189,7 +224,7 @@ pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(
          (`lsydrelight_testkit::quality`), largest over the frames and presets; face mottling as \
          `examples/real_footage.rs` measures it (median).\n",
         stage.name(),
-        model.strip_prefix(checkout()).unwrap_or(model).display()
+        setup.describe()
     );
     let _ = writeln!(md, "## Real footage\n");
     let header: Vec<&str> = PRESETS.iter().map(|p| p.nick()).collect();
@@ -199,49 +234,73 @@ pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(
         header.join(" / ")
     );
     let _ = writeln!(md, "|---|---|---|---|---|---|");
+    // A target that is the source light the element assumes passes unchanged.
+    let source = setup.source()?;
     for (name, frames) in &clips {
-        let relit: Vec<Relighting> = PRESETS
+        let relit: Vec<(Preset, Relighting)> = PRESETS
             .iter()
+            .filter(|&&p| p != source)
             .map(|&p| {
                 eprintln!("{name}: {}", p.nick());
-                relight(frames, model, p)
+                relight(frames, setup, p).map(|r| (p, r))
             })
             .collect::<Result<_, _>>()?;
-        let strengths: Vec<f64> = relit.iter().map(|r| median_strength(&r.shapes)).collect();
+        let of = |preset: Preset| {
+            relit
+                .iter()
+                .find_map(|(p, r)| (*p == preset).then_some(r))
+                .ok_or_else(|| {
+                    format!(
+                        "{} is the source light, so it is not measured",
+                        preset.nick()
+                    )
+                })
+        };
+        let strengths: Vec<f64> = PRESETS
+            .iter()
+            .map(|&p| of(p).map_or(0.0, |r| median_strength(&r.shapes)))
+            .collect();
         let per_preset: Vec<String> = strengths.iter().map(|s| format!("{s:.1}")).collect();
+        let (rs, square) = (relit.iter().map(|(_, r)| r), relit[0].1.last_square);
         let _ = writeln!(
             md,
             "| {name} | {} | {:.1} | {:+.1} | {:.1} ({:.1}) | {:.2} |",
             per_preset.join(" / "),
             median(strengths.clone()),
-            key_swap(&relit[1].shapes, &relit[2].shapes),
-            relit
-                .iter()
+            key_swap(
+                &of(Preset::WarmKeyLeft)?.shapes,
+                &of(Preset::CoolKeyRight)?.shapes
+            ),
+            rs.clone()
                 .map(|r| r.unexplained_box_edge)
                 .fold(0.0, f64::max),
-            relit.iter().map(|r| r.box_edge).fold(0.0, f64::max),
-            median(relit.iter().map(|r| r.face_mottling).collect()),
+            rs.clone().map(|r| r.box_edge).fold(0.0, f64::max),
+            median(rs.map(|r| r.face_mottling).collect()),
         );
-        let shown: Vec<&RgbImage> = std::iter::once(frames.last().expect("frames"))
-            .chain(SHOWN.iter().map(|s| {
-                let k = PRESETS.iter().position(|p| p == s).expect("a shown preset");
-                &relit[k].last
-            }))
-            .collect();
+        let mut shown = vec![frames.last().expect("frames")];
+        let mut changes = Vec::new();
+        for preset in SHOWN {
+            shown.push(&of(preset)?.last);
+            changes.push(&of(preset)?.last_change);
+        }
         let path = out.join(format!("{name}.png"));
-        sheet(&shown, relit[0].last_square, 360)
+        sheet(&shown, square, 360)
             .save(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?;
-        let changes: Vec<&RgbImage> = SHOWN
-            .iter()
-            .map(|s| &relit[PRESETS.iter().position(|p| p == s).expect("shown")].last_change)
-            .collect();
         let path = out.join(format!("{name}-change.png"));
-        sheet(&changes, relit[0].last_square, 360)
+        sheet(&changes, square, 360)
             .save(&path)
             .map_err(|e| format!("{}: {e}", path.display()))?;
     }
-    simulator(frames, model, out, stage, &mut md)?;
+    if source != Preset::None {
+        let _ = writeln!(
+            md,
+            "\n{} is the source light the element assumes (`source-preset`): it passes unchanged, \
+             strength 0.",
+            source.nick()
+        );
+    }
+    simulator(frames, setup, out, stage, &mut md)?;
     let path = out.join("direction.md");
     std::fs::write(&path, &md).map_err(|e| format!("{}: {e}", path.display()))?;
     print!("{md}");
@@ -253,11 +312,17 @@ pub fn report(frames: usize, model: &Path, out: &Path, stage: Stage) -> Result<(
 /// element marked.
 fn simulator(
     frames: usize,
-    model: &Path,
+    setup: &Setup,
     out: &Path,
     stage: Stage,
     md: &mut String,
 ) -> Result<(), String> {
+    // The call was lit by its screen, which the truth is relit from: without the
+    // monitor stream here, the element predicts that light rather than assume one.
+    let setup = &Setup {
+        model: setup.model.clone(),
+        source_preset: Some(Preset::None),
+    };
     let (dir, _) = super::call_recording(frames, stage)?;
     let clean_path = dir.join("clean-face.y4m");
     ensure_clean_face(&clean_path, "call", frames)?;
@@ -265,7 +330,7 @@ fn simulator(
     let face = read_y4m(&dir.join("face.y4m"), frames)?;
     let _ = writeln!(
         md,
-        "\n## Simulator (`call`, {frames} frames, the targets' truth lit from the {}): the exact truth beside the element\n",
+        "\n## Simulator (`call`, {frames} frames, the targets' truth lit from the {}): the exact truth beside the element, its source light predicted (`source-preset=none`)\n",
         stage.name()
     );
     let _ = writeln!(
@@ -277,7 +342,7 @@ fn simulator(
     let mut sheet_images = vec![face.last().expect("frames").clone()];
     let mut square = None;
     for preset in PRESETS {
-        let relit = relight(&face, model, preset)?;
+        let relit = relight(&face, setup, preset)?;
         let truth = read_y4m(
             &dir.join(format!("truth-preset-{}.y4m", preset.nick())),
             frames,

@@ -81,7 +81,19 @@ enum Command {
         /// Where the simulator truth's target lights shine from (as for `measure`).
         #[arg(long, default_value = "desk", value_parser = Stage::from_name)]
         stage: Stage,
+        /// The element's `source-preset` (default: the element's default);
+        /// `none` predicts the source light from the face.
+        #[arg(long, value_parser = preset_named)]
+        source_preset: Option<Preset>,
     },
+}
+
+/// A preset by its nick, `none` included.
+fn preset_named(nick: &str) -> Result<Preset, String> {
+    if nick == Preset::None.nick() {
+        return Ok(Preset::None);
+    }
+    Preset::from_nick(nick).ok_or_else(|| format!("no preset is called {nick}"))
 }
 
 mod direction;
@@ -101,9 +113,13 @@ fn main() -> Result<(), String> {
             model,
             out,
             stage,
+            source_preset,
         } => direction::report(
             frames,
-            &model.unwrap_or_else(gstlsydrelight::paths::default_model),
+            &direction::Setup {
+                model: model.unwrap_or_else(gstlsydrelight::paths::default_model),
+                source_preset,
+            },
             &checkout().join(out),
             stage,
         ),

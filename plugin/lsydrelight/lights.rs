@@ -17,6 +17,7 @@ use super::monitor::{Decision, Fallback, MonitorTrack, Reading, Transition};
 use super::settings::Settings;
 use crate::engine::Source;
 use crate::light::Light;
+use crate::targets::Preset;
 
 /// How often the element looks whether face frames wait for a silent monitor stream.
 const MONITOR_WATCH_PERIOD: gst::ClockTime = gst::ClockTime::from_mseconds(200);
@@ -66,6 +67,20 @@ impl LsydRelight {
                     reading.frames
                 );
                 (None, (Source::Known(light), Some(at)))
+            }
+            Decision::Fallback(Fallback::NoMonitorPad)
+                if settings.source_preset != Preset::None =>
+            {
+                gst::debug!(
+                    CAT,
+                    imp = self,
+                    "face frame at {}: no monitor stream: source light {}, as source-preset says",
+                    face_rt.display(),
+                    settings.source_preset.nick()
+                );
+                self.count(|st| st.assumed_source += 1);
+                let light = settings.source_preset.light();
+                (Some(Fallback::NoMonitorPad), (Source::Known(light), None))
             }
             Decision::Fallback(f) => {
                 gst::debug!(

@@ -27,6 +27,8 @@ const DEFAULT_CROP_SIZE: f64 = 1.0;
 const DEFAULT_FEATHER: f64 = 0.5;
 const DEFAULT_DENOISE: bool = true;
 const DEFAULT_QOS: bool = true;
+/// Without a monitor stream the source light is predicted, as in the paper.
+const DEFAULT_SOURCE_PRESET: Preset = Preset::None;
 const DEFAULT_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_mseconds(500);
 const MAX_TARGET_TRANSITION: gst::ClockTime = gst::ClockTime::from_seconds(60);
 
@@ -56,6 +58,8 @@ pub struct Settings {
     /// Nanoseconds by which the monitor content that lit a face frame precedes it.
     pub monitor_offset: i64,
     pub monitor_timeout: gst::ClockTime,
+    /// The light the face is lit by while no monitor stream says: `None` predicts it.
+    pub source_preset: Preset,
     /// Time the element takes for a frame, added to the latency it reports.
     pub processing_latency: gst::ClockTime,
     pub temporal: Temporal,
@@ -92,6 +96,7 @@ impl Default for Settings {
             target_transition: DEFAULT_TARGET_TRANSITION,
             monitor_offset: 0,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
+            source_preset: DEFAULT_SOURCE_PRESET,
             processing_latency: DEFAULT_PROCESSING_LATENCY,
             temporal: Temporal::default(),
             face_tracking: true,
@@ -165,6 +170,7 @@ impl Settings {
             "monitor-timeout" => {
                 self.monitor_timeout = gst::ClockTime::from_nseconds(v.get().expect(checked))
             }
+            "source-preset" => self.source_preset = v.get().expect(checked),
             "processing-latency" => {
                 self.processing_latency = gst::ClockTime::from_nseconds(v.get().expect(checked))
             }
@@ -222,6 +228,7 @@ impl Settings {
             "target-transition" => self.target_transition.nseconds().to_value(),
             "monitor-offset" => self.monitor_offset.to_value(),
             "monitor-timeout" => self.monitor_timeout.nseconds().to_value(),
+            "source-preset" => self.source_preset.to_value(),
             "processing-latency" => self.processing_latency.nseconds().to_value(),
             "alpha" => self.temporal.alpha.to_value(),
             "beta" => self.temporal.beta.to_value(),
@@ -354,6 +361,11 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .nick("Monitor timeout")
                 .blurb("Nanoseconds a monitor frame stays on screen without a newer one (or its duration, if longer); after that the monitor stream counts as stalled and the predicted light is used (a target_sink stream's frame, as stalled, and its last frame stays the target). In a non-live pipeline, also how long face frames wait for a monitor stream that sends nothing before a warning says so")
                 .default_value(DEFAULT_MONITOR_TIMEOUT.nseconds())
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecEnum::builder_with_default("source-preset", d.source_preset)
+                .nick("Source preset")
+                .blurb("Without a monitor stream connected, the light the face is lit by, as monitor content: none (the default) predicts it from the face (the paper's unknown-source mode), which reads a face lit by the room as one under a dim screen, so that a target adds its light to the room's; a preset (soft-front: a face lit from the front) states the light the relighting replaces, for a stronger change (docs/targets.md); a target equal to it passes the face unchanged; can change while playing")
                 .mutable_playing()
                 .build(),
             glib::ParamSpecUInt64::builder("processing-latency")

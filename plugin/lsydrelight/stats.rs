@@ -22,6 +22,9 @@ pub struct Stats {
     pub copy_seconds: f64,
     pub known_source: u64,
     pub predicted_source: u64,
+    /// Frames without a monitor stream relit from `source-preset`'s light (counted
+    /// in `known_source` too).
+    pub assumed_source: u64,
     pub fallbacks: u64,
     /// The monitor stream's frames and their lights.
     pub monitor: StreamLights,
@@ -146,6 +149,7 @@ impl Stats {
             .field("frame-seconds", s.frame)
             .field("known-source", self.known_source)
             .field("predicted-source", self.predicted_source)
+            .field("assumed-source", self.assumed_source)
             .field("fallbacks", self.fallbacks)
             .field("resets", p.resets)
             .field("monitor-out", self.monitor_out)

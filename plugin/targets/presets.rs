@@ -3,6 +3,8 @@
 //! in what colour), written as linear RGB over the screen's area and reduced to
 //! the contract's light grid by averaging over each cell.
 
+use std::sync::OnceLock;
+
 use gst::glib;
 
 use crate::light::{LIGHT_COLS, LIGHT_ROWS, Light};
@@ -15,7 +17,7 @@ pub enum Preset {
     /// No preset: the target comes from target-environment or target-location.
     #[default]
     #[enum_value(
-        name = "None: use target-environment or target-location",
+        name = "None: as target-preset, use target-environment or target-location; as source-preset, predict the light",
         nick = "none"
     )]
     None = 0,
@@ -190,7 +192,17 @@ impl Preset {
     }
 
     /// The preset as a light: its picture averaged over each cell of the grid.
+    /// Drawn once per process: `source-preset` asks for it every frame.
     pub fn light(self) -> Light {
+        static LIGHTS: OnceLock<Vec<Light>> = OnceLock::new();
+        let lights = LIGHTS.get_or_init(|| Preset::ALL.iter().map(|p| p.drawn()).collect());
+        match Preset::ALL.iter().position(|&p| p == self) {
+            Some(i) => lights[i].clone(),
+            None => self.drawn(),
+        }
+    }
+
+    fn drawn(self) -> Light {
         let n = LIGHT_ROWS * LIGHT_COLS;
         let mut out = vec![0f32; 3 * n];
         let inv = 1.0 / (CELL_SAMPLES * CELL_SAMPLES) as f32;
