@@ -225,7 +225,7 @@ fn a_person_walking_about_the_simulated_room_is_relit_without_a_box() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let mottled = median(m.iter().map(|m| m.mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 5.9% (10.1% in all), 0.62% and 0.14 levels; 9.7% where the picture has
+    // 5.9% (10.1% in all), 0.62% and 0.13 levels; 9.7% where the picture has
     // none with the face's shading clamped (`plugin/frame/change.rs`).
     assert!(
         unexplained < 10.0,
