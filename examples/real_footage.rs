@@ -10,7 +10,7 @@
 //! ```text
 //! cargo run --release --example real_footage -- [--media target/real-media] [--out results/real] \
 //!     [--frames 90] [--target models/targets/sunset.png] [--model models/starter] [--format RGB|I420] \
-//!     [--denoise true|false]
+//!     [--denoise true|false] [--only cuts]...
 //! ```
 //!
 //! The element runs with its defaults (`denoise` on unless `--denoise false`),
@@ -54,6 +54,10 @@ struct Args {
     /// The element's `denoise`.
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     denoise: bool,
+    /// Only this clip or recording (`astronaut`, `megamind`, `steady`, `wander`,
+    /// `slow`, `cuts`, `call`); repeat for more. Default: all.
+    #[arg(long)]
+    only: Vec<String>,
 }
 
 fn main() -> Result<(), String> {
@@ -75,7 +79,7 @@ fn main() -> Result<(), String> {
         denoise: args.denoise,
     };
     init();
-    print!("{}", report(&setup, &media, frames, &out)?);
+    print!("{}", report(&setup, &media, frames, &out, &args.only)?);
     println!(
         "before/after images and maps of the change (log luma ratio, grey for none) in {}",
         out.display()

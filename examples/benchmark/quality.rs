@@ -40,6 +40,7 @@ pub(crate) fn quality(frames: usize) -> Result<String, String> {
             &root
                 .join("results/tmp/quality")
                 .join(format!("{format:?}").to_lowercase()),
+            &[],
         )?);
     }
     Ok(text)

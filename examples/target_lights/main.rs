@@ -33,6 +33,8 @@ use gstlsydrelight::targets::{Panorama, Preset, View};
 use lsydrelight_testkit::{
     checkout, default_model,
     element::{element, stat},
+    footage::{PORTRAIT_FACE, decode},
+    init,
     person::render_person,
     recording::score_recording,
     video::{FRAME, buffer, frame_time, rgb_caps, to_rgb},
@@ -210,27 +212,56 @@ fn fit(img: &image::RgbImage, w: u32, h: u32) -> image::RgbImage {
     image::imageops::resize(img, w, h, image::imageops::FilterType::Triangle)
 }
 
-/// The simulator's person and a real portrait under every preset, each column
-/// headed by the preset's monitor picture.
+/// The film clip's frame the contact sheet shows: the face turned to the camera.
+const FILM_FRAME: usize = 10;
+
+/// A frame and the square of it the sheet shows (x, y, side); None shows it whole.
+struct SheetRow {
+    frame: RgbImage,
+    shown: Option<(u32, u32, u32)>,
+    height: u32,
+}
+
+/// The simulator's person, a real portrait and a frame of a real film clip under
+/// every preset, each column headed by the preset's monitor picture. Each frame
+/// is relit whole, as the element sees it; the portrait's row shows its head and
+/// shoulders, three face heights square, so its face is large enough to judge.
 fn sheet(out: &Path) -> Result<(), String> {
+    init();
+    let media = checkout().join("target/real-media");
     let person = render_person(&State::default(), Vec3::new(0.8, 0.8, 0.8), 320, 240);
-    let portrait_path = checkout().join("target/real-media/astronaut.png");
-    let portrait = image::open(&portrait_path)
-        .map_err(|e| {
-            format!(
-                "{}: {e} (scripts/test.sh fetches it)",
-                portrait_path.display()
-            )
-        })?
-        .to_rgb8();
-    let portrait = RgbImage {
-        width: portrait.width() as usize,
-        height: portrait.height() as usize,
-        data: portrait.into_raw(),
-    };
+    let portrait = decode(&media.join("astronaut.png"), 1)?.remove(0);
+    let film = decode(&media.join("Megamind.avi"), FILM_FRAME + 1)?.remove(FILM_FRAME);
+    let ([face_x, face_y], face_height) = PORTRAIT_FACE;
+    let side = 3.0 * face_height;
+    let head = (
+        (face_x - side / 2.0).max(0.0) as u32,
+        (face_y - side / 2.0).max(0.0) as u32,
+        side as u32,
+    );
+    let model = gstlsydrelight::paths::default_model()
+        .to_str()
+        .ok_or("the default model's path is not UTF-8")?
+        .to_string();
     let (cw, header) = (200u32, 100u32);
-    let rows: [(&RgbImage, u32); 2] = [(&person, 150), (&portrait, 200)];
-    let height = header + rows.iter().map(|r| r.1).sum::<u32>();
+    let rows = [
+        SheetRow {
+            frame: person,
+            shown: None,
+            height: 150,
+        },
+        SheetRow {
+            frame: portrait,
+            shown: Some(head),
+            height: 200,
+        },
+        SheetRow {
+            frame: film,
+            shown: None,
+            height: 150,
+        },
+    ];
+    let height = header + rows.iter().map(|r| r.height).sum::<u32>();
     let columns = 1 + Preset::ALL.len() as u32;
     let mut sheet = image::RgbImage::from_pixel(cw * columns, height, image::Rgb([24, 24, 24]));
     for (col, preset) in std::iter::once(None)
@@ -243,14 +274,22 @@ fn sheet(out: &Path) -> Result<(), String> {
             image::imageops::overlay(&mut sheet, &monitor, (x + 4) as i64, 2);
         }
         let mut y = header;
-        for (img, rh) in rows {
-            let shown = match preset {
-                None => img.clone(),
-                Some(p) => relight_still(img, |e| e.set_property("target-preset", p)),
+        for row in &rows {
+            let relit = match preset {
+                None => row.frame.clone(),
+                // The element's own default model: what a user gets who names only a preset.
+                Some(p) => relight_still(&row.frame, |e| {
+                    e.set_property("model-location", &model);
+                    e.set_property("target-preset", p)
+                }),
             };
-            let scaled = fit(&to_image(&shown), cw - 4, rh - 4);
+            let mut shown = to_image(&relit);
+            if let Some((sx, sy, side)) = row.shown {
+                shown = image::imageops::crop_imm(&shown, sx, sy, side, side).to_image();
+            }
+            let scaled = fit(&shown, cw - 4, row.height - 4);
             image::imageops::overlay(&mut sheet, &scaled, (x + 2) as i64, (y + 2) as i64);
-            y += rh;
+            y += row.height;
         }
         eprintln!("{}", preset.map_or("input", |p| p.nick()));
     }

@@ -51,7 +51,7 @@ pub fn portrait_720p(media: &Path) -> Result<RgbImage, String> {
 
 /// The face in the 512 x 512 portrait as MediaPipe boxes it
 /// (`models/face/check.json`): its centre and height, in pixels.
-const PORTRAIT_FACE: ([f32; 2], f32) = ([224.5, 129.5], 95.0);
+pub const PORTRAIT_FACE: ([f32; 2], f32) = ([224.5, 129.5], 95.0);
 
 /// A face far from the camera: a 1080p frame of a grey wall with the portrait
 /// shrunk so that its face is `face_fraction` of the frame's height, the face's

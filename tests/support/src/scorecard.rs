@@ -28,8 +28,8 @@ use gstlsydrelight::frame::{Frame, OwnedFrame};
 use crate::checkout;
 use crate::footage::{Format, Relit, decode, denoised, read_y4m, relight, through};
 use crate::quality::{
-    BoxEdges, Pixels, Region, View, box_edge_score, box_edges, change_map, mean_level, mottling,
-    mottling_by_luma, pumping,
+    BoxEdge, BoxEdges, Pixels, Region, View, box_edge_score, box_edges, change_map, mean_level,
+    mottling, mottling_by_luma, pumping,
 };
 use crate::recording::ensure_recording;
 
@@ -47,7 +47,7 @@ pub struct Measured {
     /// as issue 12 defines the measure; the square holds hair and room too.
     pub face_mottling_median: f64,
     pub pumping: f64,
-    /// Where the largest box edge is.
+    /// Where the largest box edge is, in all and where the picture has none.
     pub worst: String,
     /// Where the mottling comes from, by band of input luma ([`LUMA_BANDS`]).
     pub mottling_sources: String,
@@ -273,17 +273,24 @@ pub fn measure(
         .zip(&read(&output, View::brightness))
         .map(|(i, o)| box_edges(i, o))
         .collect();
-    let (worst_frame, worst) = (both.iter().map(|e| e.all))
-        .enumerate()
-        .max_by(|a, b| a.1.score.total_cmp(&b.1.score))
-        .expect("at least one frame");
+    let worst = |edge: fn(&BoxEdges) -> BoxEdge| {
+        let (frame, worst) = (both.iter().map(edge))
+            .enumerate()
+            .max_by(|a, b| a.1.score.total_cmp(&b.1.score))
+            .expect("at least one frame");
+        format!(
+            "frame {frame}: {:.1}% across {} = {}, {} from {}",
+            worst.score,
+            if worst.vertical { "x" } else { "y" },
+            worst.across,
+            if worst.vertical { "y" } else { "x" },
+            worst.along
+        )
+    };
     let worst = format!(
-        "frame {worst_frame}: {:.1}% across {} = {}, {} from {}",
-        worst.score,
-        if worst.vertical { "x" } else { "y" },
-        worst.across,
-        if worst.vertical { "y" } else { "x" },
-        worst.along
+        "{}; where the picture has none, {}",
+        worst(|e| e.all),
+        worst(|e| e.unexplained)
     );
     let edges: Vec<f64> = both.iter().map(|e| e.all.score).collect();
     let unexplained_box_edge_max = (both.iter())
@@ -402,8 +409,28 @@ const RECORDINGS: [(&str, usize); 5] = [
 /// The report, in markdown: the real clips in `media` (the first `frames`
 /// frames) relit as `setup` says, then the simulator's recordings relit to
 /// their own targets and scored against their truth too, then notes on
-/// each. Before/after images and maps of the change go into `images`.
-pub fn report(setup: &Setup, media: &Path, frames: usize, images: &Path) -> Result<String, String> {
+/// each. Before/after images and maps of the change go into `images`. With
+/// names in `only`, just the clips and recordings so named.
+pub fn report(
+    setup: &Setup,
+    media: &Path,
+    frames: usize,
+    images: &Path,
+    only: &[String],
+) -> Result<String, String> {
+    let known = || {
+        CLIPS
+            .map(|c| c.0)
+            .into_iter()
+            .chain(RECORDINGS.map(|r| r.0))
+    };
+    if let Some(unknown) = only.iter().find(|o| !known().any(|k| k == o.as_str())) {
+        return Err(format!(
+            "no clip or recording is called {unknown}: name one of {}",
+            known().collect::<Vec<_>>().join(", ")
+        ));
+    }
+    let wanted = |name: &str| only.is_empty() || only.iter().any(|o| o == name);
     std::fs::create_dir_all(images).map_err(|e| format!("{}: {e}", images.display()))?;
     let format = setup.format;
     let mut lines = vec![
@@ -420,7 +447,7 @@ pub fn report(setup: &Setup, media: &Path, frames: usize, images: &Path) -> Resu
         "|---|---|---|---|---|---|---|---|".into(),
     ];
     let (mut worst, mut notes) = (Vec::new(), Vec::new());
-    for (name, file) in CLIPS {
+    for (name, file) in CLIPS.into_iter().filter(|(name, _)| wanted(name)) {
         let path = media.join(file);
         if !path.exists() {
             return Err(format!(
@@ -438,7 +465,7 @@ pub fn report(setup: &Setup, media: &Path, frames: usize, images: &Path) -> Resu
         "| recording | frames | box edge where the picture has none, max % | box edge max % | box edge median % | mottling median % | over the face % | pumping (levels) | RMSE relit square | RMSE frame | input RMSE square | input RMSE frame |".into(),
         "|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ]);
-    for (recording, length) in RECORDINGS {
+    for (recording, length) in RECORDINGS.into_iter().filter(|(name, _)| wanted(name)) {
         let dir = checkout().join(format!("target/recordings/{recording}-{length}"));
         ensure_recording(&dir, recording, length)?;
         let input = read_y4m(&dir.join("face.y4m"), frames)?;

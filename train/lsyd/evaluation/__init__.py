@@ -6,6 +6,7 @@
 - ``benchmark``: the model side of the run-time against error benchmark, and its report;
 - ``modelcard``: a model's held-out figures, and its card;
 - ``seeds``: issue 16's four cells over several seeds, from ``evaluate``'s records;
+- ``real_direction``: how much of a light's side the network itself draws on real faces;
 - ``detail_bound``: how much of the detail band a change at a given resolution can remove;
 - ``metrics``: the image and temporal metrics they share, and the one loop that scores
   a network on a 9 x 9 test set.

@@ -1,0 +1,175 @@
+"""How much of a light's side the network itself draws on real faces, before the element's paste.
+
+    python -m lsyd.evaluation.real_direction --models ../models/starter ../models/starter-next
+        [--out ../results/direction/network.md]
+
+`examples/target_lights direction` measures the key swap of the element's output; this measures
+the network's own output on the same real footage (the astronaut as a 720p still and the film
+clip's first frames, from ``scripts/setup.sh full``), so the two together say whether a weak swap
+is the model's or the paste's. Each frame is cropped as the element crops it (BlazeFace's box and
+the model's crop rule), area-resampled to the model's resolution and relit with the source light
+predicted (no monitor stream) to two side keys of this module's own: a warm screen lit over its
+left quarter and a cool one over its right (the colours of the `warm-key-left` and
+`cool-key-right` presets; their screens fade more softly).
+
+Over the face's box in the crop (one face height square), with the element's measure
+(``lsydrelight_testkit::direction``): strength, the RMS of 100 ln((Y_out + 10) / (Y_in + 10))
+(Y Rec. 709 luma in 0-255); asymmetry, its mean over the image-left half less the image-right
+half; key swap, the warm key's asymmetry less the cool key's. Medians over the frames.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import cv2
+import numpy as np
+import onnxruntime as ort
+import torch
+
+from .. import contract, face_detector, runs
+from ..data import area_resize
+from . import ROOT
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA_FLOOR = 10.0
+WARM, COOL = (1.0, 0.62, 0.3), (0.45, 0.65, 1.0)
+DIM = 0.04  # the rest of each key's screen, as the presets' dark part
+
+
+def side_key(colour: tuple[float, float, float], left: bool) -> torch.Tensor:
+    """A [1, 3, rows, cols] light: ``colour`` over a quarter of the screen at one side, dim elsewhere."""
+    light = np.full((3, contract.LIGHT_ROWS, contract.LIGHT_COLS), DIM, np.float32)
+    quarter = contract.LIGHT_COLS // 4
+    columns = slice(0, quarter) if left else slice(contract.LIGHT_COLS - quarter, None)
+    light[:, :, columns] = np.array(colour, np.float32)[:, None, None]
+    return torch.from_numpy(light)[None]
+
+
+def astronaut_720p(path: Path) -> np.ndarray:
+    """The portrait scaled to 720 rows in a grey 1280 x 720 frame, as `target_lights direction` shows it."""
+    portrait = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+    width = round(portrait.shape[1] * 720 / portrait.shape[0])
+    frame = np.full((720, 1280, 3), 128, np.uint8)
+    left = (1280 - width) // 2
+    frame[:, left : left + width] = cv2.resize(portrait, (width, 720), interpolation=cv2.INTER_AREA)
+    return frame
+
+
+def film_frames(path: Path, count: int) -> list[np.ndarray]:
+    video = cv2.VideoCapture(str(path))
+    frames = []
+    while len(frames) < count:
+        ok, frame = video.read()
+        if not ok:
+            break
+        frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
+    if not frames:
+        raise SystemExit(f"{path}: no frames could be read; run scripts/setup.sh full, which fetches it")
+    return frames
+
+
+class Detector:
+    """BlazeFace short-range as the element runs it: the largest face's box in frame pixels, or None."""
+
+    def __init__(self, model: Path):
+        self.session = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
+
+    def box(self, frame: np.ndarray) -> list[float] | None:
+        tensor, place = face_detector.letterbox(frame)
+        outputs = self.session.run(None, {self.session.get_inputs()[0].name: tensor})
+        regressors, scores = sorted(outputs, key=lambda o: o.shape[-1], reverse=True)
+        faces = face_detector.decode(regressors, scores, place)
+        if not faces:
+            return None
+        return max(faces, key=lambda f: (f["box"][2] - f["box"][0]) * (f["box"][3] - f["box"][1]))["box"]
+
+
+def crop(frame: np.ndarray, box: list[float], rule: dict, resolution: int) -> np.ndarray:
+    """The model's square round the face (edges continued past the frame), in [0, 1], resolution²."""
+    face_height = box[3] - box[1]
+    side = round(rule["side"] * face_height)
+    centre_x, centre_y = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2 - rule["lift"] * face_height
+    x0, y0 = round(centre_x - side / 2), round(centre_y - side / 2)
+    padded = np.pad(frame, ((side, side), (side, side), (0, 0)), mode="edge")
+    square = padded[y0 + side : y0 + 2 * side, x0 + side : x0 + 2 * side]
+    return area_resize(square[None].astype(np.float32) / 255.0, resolution)[0]
+
+
+def face_box(rule: dict, resolution: int) -> tuple[slice, slice]:
+    """Rows and columns of the crop that hold the face: one face height square about its centre."""
+    face = resolution / rule["side"]
+    centre_y = resolution / 2 + rule["lift"] * face
+    rows = slice(round(centre_y - face / 2), round(centre_y + face / 2))
+    columns = slice(round(resolution / 2 - face / 2), round(resolution / 2 + face / 2))
+    return rows, columns
+
+
+def shape(before: np.ndarray, after: np.ndarray, box: tuple[slice, slice]) -> tuple[float, float]:
+    """(asymmetry, strength) of the change over the face box of two crops in [0, 1]."""
+    level = lambda img: 255.0 * img[box] @ LUMA + LUMA_FLOOR  # noqa: E731
+    change = 100.0 * np.log(level(after) / level(before))
+    half = change.shape[1] // 2
+    return float(change[:, :half].mean() - change[:, -half:].mean()), float(np.sqrt((change**2).mean()))
+
+
+def measure(model: Path, frames: list[np.ndarray], detector: Detector) -> dict[str, float]:
+    net, cfg = runs.load_saved_network(model / "network.pt")
+    rule = contract.read(model / "model.json")["crop"]
+    box = face_box(rule, cfg.resolution)
+    swaps, strengths = [], []
+    for frame in frames:
+        found = detector.box(frame)
+        if found is None:
+            continue
+        image = crop(frame, found, rule, cfg.resolution)
+        tensor = torch.from_numpy(image.transpose(2, 0, 1).copy())[None]
+        shapes = []
+        for key in (side_key(WARM, left=True), side_key(COOL, left=False)):
+            with torch.no_grad():
+                relit, _ = net(tensor, None, key)
+            shapes.append(shape(image, relit[0].clamp(0, 1).numpy().transpose(1, 2, 0), box))
+        swaps.append(shapes[0][0] - shapes[1][0])
+        strengths.extend(s[1] for s in shapes)
+    if not swaps:
+        raise SystemExit(f"{model}: no face was found in any frame")
+    return {"frames": len(swaps), "key_swap": float(np.median(swaps)), "strength": float(np.median(strengths))}
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--models", type=Path, nargs="+", default=[ROOT / "models" / "starter"])
+    p.add_argument("--media", type=Path, default=ROOT / "target" / "real-media")
+    p.add_argument("--frames", type=int, default=30, help="frames of the film clip")
+    p.add_argument("--out", type=Path, default=ROOT / "results" / "direction" / "network.md")
+    a = p.parse_args()
+
+    portrait = a.media / "astronaut.png"
+    if not portrait.exists():
+        raise SystemExit(f"{portrait} is missing: run scripts/setup.sh full, which fetches it")
+    clips = {
+        "astronaut-720p": [astronaut_720p(portrait)],
+        "megamind": film_frames(a.media / "Megamind.avi", a.frames),
+    }
+    detector = Detector(ROOT / "models" / "face" / "blazeface.onnx")
+    lines = [
+        f"Made by `python -m lsyd.evaluation.real_direction --models {' '.join(m.name for m in a.models)}`: "
+        "the network alone, before the element's paste (the module's docstring says how).",
+        "",
+        "| model | clip | frames | the network's key swap % "
+        "| its median strength % (counts the blur of its output as change) |",
+        "|---|---|---|---|---|",
+    ]
+    for model in a.models:
+        for name, frames in clips.items():
+            m = measure(model, frames, detector)
+            lines.append(f"| {model.name} | {name} | {m['frames']} | {m['key_swap']:+.1f} | {m['strength']:.1f} |")
+            print(lines[-1])
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.write_text("\n".join(lines) + "\n")
+    print(f"wrote {a.out}")
+
+
+if __name__ == "__main__":
+    main()
