@@ -21,6 +21,8 @@ half; key swap, the warm key's asymmetry less the cool key's. Medians over the f
 from __future__ import annotations
 
 import argparse
+import re
+import subprocess
 from pathlib import Path
 
 import cv2
@@ -48,26 +50,42 @@ def side_key(colour: tuple[float, float, float], left: bool) -> torch.Tensor:
 
 
 def astronaut_720p(path: Path) -> np.ndarray:
-    """The portrait scaled to 720 rows in a grey 1280 x 720 frame, as `target_lights direction` shows it."""
+    """The portrait scaled to 720 rows in a mid-grey 1280 x 720 frame, placed as
+    ``lsydrelight_testkit::footage::portrait_720p`` places it (that one scales with a triangle filter)."""
     portrait = cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
     width = round(portrait.shape[1] * 720 / portrait.shape[0])
-    frame = np.full((720, 1280, 3), 128, np.uint8)
+    frame = np.full((720, 1280, 3), 96, np.uint8)
     left = (1280 - width) // 2
     frame[:, left : left + width] = cv2.resize(portrait, (width, 720), interpolation=cv2.INTER_AREA)
     return frame
 
 
 def film_frames(path: Path, count: int) -> list[np.ndarray]:
-    video = cv2.VideoCapture(str(path))
-    frames = []
-    while len(frames) < count:
-        ok, frame = video.read()
-        if not ok:
-            break
-        frames.append(cv2.cvtColor(frame, cv2.COLOR_BGR2RGB))
-    if not frames:
-        raise SystemExit(f"{path}: no frames could be read; run scripts/setup.sh full, which fetches it")
-    return frames
+    """The first ``count`` frames, decoded by GStreamer's ``decodebin ! videoconvert`` to RGB, as the
+    element's measures decode them (``lsydrelight_testkit::footage::decode``): one decoder for both."""
+    if not path.exists():
+        raise SystemExit(f"{path} is missing: run scripts/setup.sh full, which fetches it")
+    decoded = ["filesrc", f"location={path}", "!", "decodebin", "!", "videoconvert", "!", "video/x-raw,format=RGB"]
+    probe = subprocess.run(
+        ["gst-launch-1.0", "-v", *decoded, "!", "fakesink", "num-buffers=1"], capture_output=True, check=False
+    )
+    caps = re.search(
+        rb"fakesink0.GstPad:sink: caps = video/x-raw, width=\(int\)(\d+), height=\(int\)(\d+)", probe.stdout
+    )
+    run = subprocess.run(
+        ["gst-launch-1.0", "-q", *decoded, "!", "identity", f"eos-after={count}", "!", "fdsink", "fd=1"],
+        capture_output=True,
+        check=False,
+    )
+    if caps is None or run.returncode != 0 or not run.stdout:
+        raise SystemExit(
+            f"{path}: GStreamer could not decode it: {(probe.stderr + run.stderr).decode(errors='replace')}"
+        )
+    width, height = int(caps[1]), int(caps[2])
+    stride = (3 * width + 3) // 4 * 4  # GStreamer's RGB rows are 4-byte aligned
+    whole = len(run.stdout) // (stride * height) * stride * height
+    frames = np.frombuffer(run.stdout[:whole], np.uint8).reshape(-1, height, stride)[:count, :, : 3 * width]
+    return [f.reshape(height, width, 3) for f in frames]
 
 
 class Detector:
