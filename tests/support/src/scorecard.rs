@@ -29,7 +29,7 @@ use crate::checkout;
 use crate::footage::{Format, Relit, decode, denoised, read_y4m, relight, through};
 use crate::quality::{
     BoxEdge, BoxEdges, Pixels, Region, View, box_edge_score, box_edges, change_map, mean_level,
-    mottling, mottling_by_luma, pumping,
+    mottling, mottling_by_luma, mottling_in_all, pumping,
 };
 use crate::recording::ensure_recording;
 
@@ -46,6 +46,8 @@ pub struct Measured {
     /// The same over the face alone ([`Region::face_within`] the relit square),
     /// as issue 12 defines the measure; the square holds hair and room too.
     pub face_mottling_median: f64,
+    /// The same counting the face's near-black pixels too ([`mottling_in_all`]).
+    pub face_mottling_in_all_median: f64,
     pub pumping: f64,
     /// Where the largest box edge is, in all and where the picture has none.
     pub worst: String,
@@ -68,7 +70,7 @@ impl Measured {
     /// The columns every table has, as a markdown row left open at the end.
     pub fn row(&self) -> String {
         format!(
-            "| {} | {} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} | {:.2}",
+            "| {} | {} | {:.1} | {:.1} | {:.1} | {:.2} | {:.2} ({:.2}) | {:.2}",
             self.name,
             self.frames,
             self.unexplained_box_edge_max,
@@ -76,6 +78,7 @@ impl Measured {
             self.box_edge_median,
             self.mottling_median,
             self.face_mottling_median,
+            self.face_mottling_in_all_median,
             self.pumping
         )
     }
@@ -108,8 +111,8 @@ fn read<'a>(frames: &'a [OwnedFrame], reading: fn(Frame<'a>) -> View<'a>) -> Vec
 /// Edges, in levels of input luma, of the bands the mottling is broken down by.
 const LUMA_BANDS: [f64; 3] = [8.0, 16.0, 64.0];
 
-/// One frame's mottling over the face, and per band of input luma its share
-/// of the face and of the mottling's sum of squares.
+/// One frame's mottling over every pixel of the face, and per band of input
+/// luma its share of the face and of the mottling's sum of squares.
 type MottlingByLuma = (f64, Vec<(f64, f64)>);
 
 /// Per band of input luma (median over the frames): its share of the face
@@ -123,7 +126,7 @@ fn mottling_sources(input: &[View], output: &[View], regions: &[Region]) -> Stri
         .map(|((i, o), &r)| {
             let face = r.face_within();
             (
-                mottling(i, o, face),
+                mottling_in_all(i, o, face),
                 mottling_by_luma(i, o, face, &LUMA_BANDS),
             )
         })
@@ -354,6 +357,11 @@ pub fn measure(
         box_edge_median: median(edges),
         mottling_median: median(mottled),
         face_mottling_median: median(face_mottled),
+        face_mottling_in_all_median: median(
+            (output_colour.iter().zip(&changed_colour).zip(&regions))
+                .map(|((o, i), r)| mottling_in_all(i, o, r.face_within()))
+                .collect(),
+        ),
         pumping: pumping(&means),
     })
 }
@@ -374,7 +382,7 @@ fn mottlings(input: &[View], output: &[View], regions: &[Region]) -> (Vec<f64>, 
 /// the RGB path's output through it.
 fn notes_of(m: &Measured, format: Format) -> Vec<String> {
     let mut notes = vec![format!(
-        "{}: mottling over the face by input luma (levels), median over the frames: {}",
+        "{}: mottling over every pixel of the face by input luma (levels), median over the frames: {}",
         m.name, m.mottling_sources
     )];
     if let Some((edge, face_mottled)) = m.denoising {
@@ -443,7 +451,7 @@ pub fn report(
             }
         ),
         String::new(),
-        "| clip | frames | box edge where the picture has none, max % | box edge max % | box edge median % | mottling median % | over the face % | pumping (levels) |".into(),
+        "| clip | frames | box edge where the picture has none, max % | box edge max % | box edge median % | mottling median % | over the face % (in all) | pumping (levels) |".into(),
         "|---|---|---|---|---|---|---|---|".into(),
     ];
     let (mut worst, mut notes) = (Vec::new(), Vec::new());
@@ -462,7 +470,7 @@ pub fn report(
     }
     lines.extend([
         String::new(),
-        "| recording | frames | box edge where the picture has none, max % | box edge max % | box edge median % | mottling median % | over the face % | pumping (levels) | RMSE relit square | RMSE frame | input RMSE square | input RMSE frame |".into(),
+        "| recording | frames | box edge where the picture has none, max % | box edge max % | box edge median % | mottling median % | over the face % (in all) | pumping (levels) | RMSE relit square | RMSE frame | input RMSE square | input RMSE frame |".into(),
         "|---|---|---|---|---|---|---|---|---|---|---|---|".into(),
     ]);
     for (recording, length) in RECORDINGS.into_iter().filter(|(name, _)| wanted(name)) {
