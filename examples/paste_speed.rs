@@ -33,7 +33,8 @@ use std::time::Instant;
 use clap::Parser;
 
 use gstlsydrelight::frame::{
-    Crop, DetailDenoiser, LightingChange, OwnedFrame, PixelFormat, YuvMatrix, sample_crop,
+    Crop, DetailDenoiser, FacePlace, LightingChange, OwnedFrame, PixelFormat, YuvMatrix,
+    sample_crop,
 };
 use gstlsydrelight::light::Light;
 use gstlsydrelight::parallel::beside;
@@ -133,7 +134,7 @@ fn main() {
             .collect();
         cases.push(Case {
             name,
-            change: LightingChange::new(&input, &relit, RES),
+            change: LightingChange::new(&input, &relit, RES, FacePlace::default()),
             buffers,
             crop,
             feather: (FEATHER * crop.size as f64).round() as usize,

@@ -7,7 +7,9 @@ use gstlsydrelight::engine::{
     self, Action, FramePolicy, FrameRequest, PassThrough, Provider, Relighter, Reuse, Skips,
     Source, Temporal,
 };
-use gstlsydrelight::frame::{Crop, Frame, FrameMut, LightingChange, PixelFormat, YuvMatrix};
+use gstlsydrelight::frame::{
+    Crop, FacePlace, Frame, FrameMut, LightingChange, PixelFormat, YuvMatrix,
+};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{
@@ -55,6 +57,7 @@ fn run_faded(
         .process(FrameRequest {
             frame: &frame,
             crop,
+            face: FacePlace::default(),
             strength,
             source,
             late,
@@ -276,6 +279,7 @@ fn the_network_gives_the_same_beside_other_work_on_the_frame() {
     let request = || FrameRequest {
         frame: &frame,
         crop,
+        face: FacePlace::default(),
         strength: 1.0,
         source: white_monitor(),
         late: false,

@@ -122,7 +122,7 @@ fn relight(frames: &[RgbImage], setup: &Setup, preset: Preset) -> Result<Relight
     let (mut edges, mut unexplained) = (Vec::new(), Vec::new());
     for (k, r) in relit_at_full_strength(&relit) {
         let (i, o) = (input[k].frame(), relit[k].0.frame());
-        let face = r.region.face_within();
+        let face = r.face;
         faces.push((k, face));
         shapes.push(light_shape(&View::pixels(i), &View::pixels(o), face));
         let (luma_in, luma_out) = (View::brightness(i), View::brightness(o));

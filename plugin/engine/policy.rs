@@ -27,7 +27,9 @@ use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
 use crate::engine::contract::PRESENCE_SIZE;
-use crate::frame::{Crop, Frame, LightingChange, mean_luma, resample_square, sample_crop};
+use crate::frame::{
+    Crop, FacePlace, Frame, LightingChange, mean_luma, resample_square, sample_crop,
+};
 use crate::light::Light;
 
 /// Where this frame's source light comes from.
@@ -90,6 +92,8 @@ pub struct FrameRequest<'a> {
     pub frame: &'a Frame<'a>,
     /// The face region.
     pub crop: Crop,
+    /// Where the face is in it.
+    pub face: FacePlace,
     /// How much of the relighting to show, in [0, 1]: a followed face fading in or
     /// out; 0 when no face is followed.
     pub strength: f32,
@@ -236,6 +240,7 @@ pub enum Prepared {
 pub struct Pending {
     image: Vec<f32>,
     crop: Crop,
+    face: FacePlace,
     source: Source,
     want_prediction: bool,
     average: Option<Light>,
@@ -382,6 +387,7 @@ impl FramePolicy {
         let FrameRequest {
             frame,
             crop,
+            face,
             strength,
             source,
             late,
@@ -491,6 +497,7 @@ impl FramePolicy {
         Ok(Prepared::Relight(Pending {
             image,
             crop,
+            face,
             source,
             want_prediction,
             average,
@@ -543,6 +550,7 @@ impl FramePolicy {
         let Pending {
             image,
             crop,
+            face,
             source,
             want_prediction,
             average,
@@ -560,7 +568,7 @@ impl FramePolicy {
         };
         self.counts.relit += 1;
         let change = timed(&mut self.counts.change_seconds, || {
-            LightingChange::new(&image, &relit, res)
+            LightingChange::new(&image, &relit, res, face)
         });
         let last = self.last.insert(Processed {
             image,

@@ -8,7 +8,8 @@
 //! - [`tracker`]: pure logic over the detector's answers: when to run it,
 //!   which face to follow, smoothing, and a fade when the face goes or comes.
 //! - Here: the face box, the square crop and the one rule between them
-//!   ([`crop_from_face`]), and the small resampler both use ([`sample_square`]).
+//!   ([`crop_from_face`]), where the face lies in a crop moved to fit the
+//!   frame ([`face_place`]), and the small resampler both use ([`sample_square`]).
 
 pub mod detector;
 pub mod search;
@@ -17,7 +18,7 @@ pub mod tracker;
 pub use detector::{DetectorError, FaceDetector};
 pub use tracker::{FaceTracker, Tracked, TrackerSettings};
 
-use crate::frame::{Crop, Frame};
+use crate::frame::{Crop, FacePlace, Frame};
 
 /// A face found in a frame, in the frame's pixels.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -98,6 +99,21 @@ impl Square {
             (self.cy / height as f32) as f64,
             (self.side / width.min(height) as f32) as f64,
         )
+    }
+}
+
+/// Where the face the rule's square `wanted` was made round lies in `crop`
+/// (the square moved, or shrunk, to fit the frame), in fractions of the
+/// crop's side.
+pub fn face_place(wanted: Square, crop: Crop, rule: CropRule) -> FacePlace {
+    let face_height = wanted.side / rule.side;
+    let side = crop.size.max(1) as f32;
+    FacePlace {
+        centre: [
+            (wanted.cx - crop.x as f32) / side,
+            (wanted.cy + rule.lift * face_height - crop.y as f32) / side,
+        ],
+        height: face_height / side,
     }
 }
 
@@ -286,6 +302,30 @@ mod tests {
         assert_eq!((s.cx, s.cy, s.side), (320.0, 180.0, 360.0));
         let c = Square::centred(640, 360).crop(640, 360);
         assert_eq!((c.x, c.y, c.size), (140, 0, 360));
+    }
+
+    #[test]
+    fn a_face_near_the_top_sits_high_in_a_crop_moved_into_the_frame() {
+        // The astronaut in 720p: her square reaches 119 px past the top, so the
+        // crop is moved down and her face is 0.37 of the crop from its top,
+        // where the rule alone would put it at 0.58.
+        let astronaut = face(600.0, 207.0, 195.0);
+        let wanted = crop_from_face(&astronaut, CropRule::TRAINING);
+        let crop = wanted.clamped(1280, 720).crop(1280, 720);
+        assert_eq!(crop.y, 0);
+        let place = face_place(wanted, crop, CropRule::TRAINING);
+        assert!(
+            (place.centre[1] - 207.0 / crop.size as f32).abs() < 1e-3,
+            "{place:?}"
+        );
+        assert!((place.centre[0] - (600.0 - crop.x as f32) / crop.size as f32).abs() < 1e-3);
+        assert!((place.height - 195.0 / crop.size as f32).abs() < 1e-3);
+        // A crop the rule did not move puts the face where the rule says.
+        let free = crop_from_face(&face(600.0, 400.0, 195.0), CropRule::TRAINING);
+        let place = face_place(free, free.crop(1280, 720), CropRule::TRAINING);
+        let rule = FacePlace::default();
+        assert!((place.centre[1] - rule.centre[1]).abs() < 0.01, "{place:?}");
+        assert!((place.height - rule.height).abs() < 0.01, "{place:?}");
     }
 
     #[test]

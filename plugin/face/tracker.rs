@@ -74,6 +74,9 @@ pub struct Tracked {
     /// The crop to relight, inside the frame. Before any face was found, the
     /// centred full-height square.
     pub square: Square,
+    /// The square the crop rule gives round the followed face (smoothed),
+    /// before it was moved inside the frame: where the face is in `square`.
+    pub wanted: Square,
     /// How much of the relighting to show, in [0, 1]: 0 with no face.
     pub fade: f32,
     /// Whether the detector ran on this frame.
@@ -181,6 +184,7 @@ impl FaceTracker {
             .map_or(Square::centred(frame.width, frame.height), |f| f.value());
         Ok(Tracked {
             square: square.clamped(frame.width, frame.height),
+            wanted: square,
             fade: self.fade,
             detected,
             confidence,

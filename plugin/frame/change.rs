@@ -28,9 +28,38 @@ pub struct LightingChange {
     pub(super) log_gain: [Vec<f32>; 3],
 }
 
+/// Where the face is in the network's crop, in fractions of the crop's side:
+/// its centre and its height (BlazeFace's box, hairline to chin). The crop
+/// rule puts it at the same place in every crop, unless the crop was moved
+/// to stay inside the frame (a face near the frame's top sits higher in it).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FacePlace {
+    pub centre: [f32; 2],
+    pub height: f32,
+}
+
+impl FacePlace {
+    /// Where the crop rule of `side` face heights across, its centre `lift`
+    /// face heights above the face's, puts the face.
+    pub fn by_rule(side: f32, lift: f32) -> FacePlace {
+        FacePlace {
+            centre: [0.5, 0.5 + lift / side],
+            height: 1.0 / side,
+        }
+    }
+}
+
+impl Default for FacePlace {
+    /// Where the training captures' rule puts the face.
+    fn default() -> Self {
+        FacePlace::by_rule(crate::face::CROP_SIDE, crate::face::CROP_LIFT)
+    }
+}
+
 impl LightingChange {
-    /// From the network's input and output (planar sRGB in [0, 1], 3 × res × res).
-    pub fn new(input: &[f32], relit: &[f32], res: usize) -> LightingChange {
+    /// From the network's input and output (planar sRGB in [0, 1], 3 × res ×
+    /// res), the face at `face` in the crop.
+    pub fn new(input: &[f32], relit: &[f32], res: usize, face: FacePlace) -> LightingChange {
         let relit = bound_invented_light(input, relit, res * res);
         // The change is smooth over many network pixels: at half the
         // resolution its blurs cost a quarter and lose nothing.
@@ -41,7 +70,7 @@ impl LightingChange {
         };
         LightingChange {
             res,
-            log_gain: smooth_log_gain(&input, &relit, res),
+            log_gain: smooth_log_gain(&input, &relit, res, face),
         }
     }
 
@@ -155,17 +184,14 @@ const SHADING_DETAIL: f32 = 0.02;
 const FACE_SHADING_REACH: (f32, f32) = (0.6, 1.6);
 
 /// Per pixel of a res × res map of the network's crop, how much of the
-/// face's own shading passes: 1 over the face, where the crop rule puts it
-/// (`face::CROP_SIDE` face heights across, the face's centre
-/// `face::CROP_LIFT` face heights below the crop's), falling by smoothstep
-/// to 0 at the end of [`FACE_SHADING_REACH`].
-fn face_shading_weights(res: usize) -> impl Iterator<Item = f32> {
-    let half_face = 0.5 / crate::face::CROP_SIDE;
-    let centre = [0.5, 0.5 + crate::face::CROP_LIFT / crate::face::CROP_SIDE];
+/// face's own shading passes: 1 over the face (at `face`), falling by
+/// smoothstep to 0 at the end of [`FACE_SHADING_REACH`].
+fn face_shading_weights(res: usize, face: FacePlace) -> impl Iterator<Item = f32> {
+    let half_face = 0.5 * face.height;
     let (from, to) = FACE_SHADING_REACH;
     (0..res * res).map(move |i| {
         let u = [i % res, i / res].map(|v| (v as f32 + 0.5) / res as f32);
-        let distance = (u[0] - centre[0]).hypot(u[1] - centre[1]) / half_face;
+        let distance = (u[0] - face.centre[0]).hypot(u[1] - face.centre[1]) / half_face;
         let t = ((to - distance) / (to - from)).clamp(0.0, 1.0);
         t * t * (3.0 - 2.0 * t)
     })
@@ -186,7 +212,7 @@ fn blur(field: &[f32], res: usize, fraction: f32) -> Vec<f32> {
 /// [`BRIGHTNESS_SMOOTHING`] with shading detail, colour over
 /// [`COLOUR_SMOOTHING`]. A gain that is not finite (the network's NaN) counts
 /// as no change.
-fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize) -> [Vec<f32>; 3] {
+fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) -> [Vec<f32>; 3] {
     let n = res * res;
     let log_gain = |c: usize| -> Vec<f32> {
         (c * n..(c + 1) * n)
@@ -226,7 +252,7 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize) -> [Vec<f32>; 3] {
     let brightness: Vec<f32> = coarse
         .iter()
         .zip(weighted_blur(&mean, &weights[1]))
-        .zip(face_shading_weights(res))
+        .zip(face_shading_weights(res, face))
         .map(|((c, f), face)| {
             let shading = f - c;
             c + face * shading + (1.0 - face) * shading.clamp(-SHADING_DETAIL, SHADING_DETAIL)

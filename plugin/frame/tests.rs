@@ -93,6 +93,46 @@ fn a_crop_resampled_smaller_is_the_smaller_crop() {
 }
 
 #[test]
+fn the_face_shading_passes_where_the_face_is() {
+    // A key light from the image's left: the network's output 30% brighter
+    // than its grey input over the left half of the crop and 30% darker over
+    // the right. Away from the face the finer shading is held within 2% of a
+    // blur over half the crop; over the face it passes whole. A crop moved
+    // down to stay inside the frame holds the face high: the side must pass
+    // there, not at the place the crop rule would have put it.
+    let res = 96;
+    let n = res * res;
+    let input = vec![0.5f32; 3 * n];
+    let relit: Vec<f32> = (0..3 * n)
+        .map(|i| if i % res < res / 2 { 0.65 } else { 0.385 })
+        .collect();
+    let high = FacePlace {
+        centre: [0.5, 0.3],
+        height: 1.0 / 2.9,
+    };
+    // The log gain a quarter face height left of the face's centre less as
+    // far right of it, over the three channels.
+    let side = |change: &LightingChange, face: FacePlace| -> f32 {
+        let at = |dx: f32| -> f32 {
+            let u = [face.centre[0] + dx * face.height, face.centre[1]];
+            (0..3)
+                .map(|c| change.sample(&change.log_gain[c], u))
+                .sum::<f32>()
+                / 3.0
+        };
+        at(-0.25) - at(0.25)
+    };
+    let raw = (0.65f32 / 0.385).ln();
+    let placed = side(&LightingChange::new(&input, &relit, res, high), high);
+    let by_rule = side(
+        &LightingChange::new(&input, &relit, res, FacePlace::default()),
+        high,
+    );
+    assert!(placed > 0.8 * raw, "{placed} of {raw}");
+    assert!(by_rule < 0.5 * raw, "{by_rule} of {raw}");
+}
+
+#[test]
 fn identity_change_keeps_the_frame() {
     let mut data = rgb_frame(64, 64, |x, y| {
         [(x * 4) as u8, (y * 4) as u8, ((x + y) * 2) as u8]
@@ -104,7 +144,7 @@ fn identity_change_keeps_the_frame() {
         size: 64,
     };
     let input = sample_crop(&Frame::packed_rgb(&data, 64, 64), crop, 16);
-    let change = LightingChange::new(&input, &input, 16);
+    let change = LightingChange::new(&input, &input, 16, FacePlace::default());
     let mut fm = FrameMut {
         format: PixelFormat::Rgb,
         width: 64,
@@ -190,7 +230,7 @@ fn random_change(res: usize, wild: bool, noise: &mut Noise) -> LightingChange {
     let mut image = |lo, hi| -> Vec<f32> { (0..3 * n).map(|_| noise.uniform(lo, hi)).collect() };
     if !wild {
         let (input, relit) = (image(0.0, 1.0), image(0.0, 1.0));
-        return LightingChange::new(&input, &relit, res);
+        return LightingChange::new(&input, &relit, res, FacePlace::default());
     }
     let log_gain = image(-3.0, 3.0);
     LightingChange {
@@ -281,7 +321,7 @@ fn a_network_output_that_is_not_finite_changes_nothing_there() {
         .map(|_| noise.uniform(0.2, 0.8))
         .collect();
     let relit = vec![f32::NAN; input.len()];
-    let change = LightingChange::new(&input, &relit, res);
+    let change = LightingChange::new(&input, &relit, res, FacePlace::default());
     for format in FORMATS {
         let buffers = random_frame(format, 37, 29, &mut noise);
         for crop in crops(37, 29) {
@@ -531,7 +571,7 @@ fn gained(
         planes: [(&mut after, w * 3), (&mut [], 0), (&mut [], 0)],
         matrix: YuvMatrix::BT601_LIMITED,
     };
-    LightingChange::new(&input, &relit, res).apply(&mut fm, crop, feather);
+    LightingChange::new(&input, &relit, res, FacePlace::default()).apply(&mut fm, crop, feather);
     (before, after)
 }
 
@@ -739,7 +779,11 @@ fn yuv_and_rgb_frames_take_the_same_change() {
         (means, worst)
     };
     let (_, before) = compare(&yuv, &|x, y, c| pixel(x, y)[c]);
-    LightingChange::new(&input, &relit, res).apply(&mut yuv.frame_mut(), crop, 10);
+    LightingChange::new(&input, &relit, res, FacePlace::default()).apply(
+        &mut yuv.frame_mut(),
+        crop,
+        10,
+    );
     let (means, after) = compare(&yuv, &|x, y, c| rgb_after[(y * w + x) * 3 + c]);
     // Each paste rounds and dithers, by up to a level in each plane, which
     // the conversion back to RGB spreads over the channels: three levels at

@@ -95,6 +95,7 @@ impl LsydRelight {
                 .prepare(FrameRequest {
                     frame: &view,
                     crop: region.crop,
+                    face: region.face,
                     strength: region.strength,
                     source,
                     late,
@@ -231,7 +232,13 @@ impl LsydRelight {
         drop(guard);
         if outcome_shows_face {
             // Downstream (and the measures) can see which square was relit,
-            // how strongly, and how far the change reaches beyond it.
+            // how strongly, how far the change reaches beyond it, and where
+            // the face is in it (one face height square about its centre).
+            let side = crop.size as f32;
+            let face_size = region.face.height * side;
+            let face_corner = |start: usize, centre: f32| {
+                (start as f32 + centre * side - face_size / 2.0).round() as i32
+            };
             let mut roi = gst_video::VideoRegionOfInterestMeta::add(
                 buffer.make_mut(),
                 "face",
@@ -246,6 +253,9 @@ impl LsydRelight {
                 gst::Structure::builder("lsydrelight")
                     .field("strength", f64::from(shown_strength))
                     .field("feather", feather as u32)
+                    .field("face-x", face_corner(crop.x, region.face.centre[0]))
+                    .field("face-y", face_corner(crop.y, region.face.centre[1]))
+                    .field("face-size", face_size.round() as u32)
                     .build(),
             );
         }

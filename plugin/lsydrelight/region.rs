@@ -8,14 +8,19 @@ use std::time::Instant;
 use crate::engine::CropSpec;
 use crate::engine::EngineError;
 use crate::face::detector::SearchStep;
-use crate::face::{CropRule, DetectorError, FaceBox, FaceDetector, FaceTracker, TrackerSettings};
-use crate::frame::{Crop, Frame};
+use crate::face::{
+    CropRule, DetectorError, FaceBox, FaceDetector, FaceTracker, TrackerSettings, face_place,
+};
+use crate::frame::{Crop, FacePlace, Frame};
 
 use super::settings::Settings;
 
 /// One frame's face region.
 pub struct Region {
     pub crop: Crop,
+    /// Where the face is in the crop: the rule's place, or higher or lower
+    /// where the crop was moved to stay inside the frame.
+    pub face: FacePlace,
     /// How much of the relighting to show, in [0, 1]; 0 with no face.
     pub strength: f32,
     /// The followed face, when the detector ran on this frame.
@@ -87,8 +92,10 @@ impl FaceRegion {
         let (width, height) = (frame.width, frame.height);
         let Some((detector, tracker)) = self.follower.as_mut() else {
             let manual = &settings.crop;
+            let rule = self.tracker_settings.crop;
             return Ok(Region {
                 crop: Crop::centred(width, height, manual.x, manual.y, manual.size),
+                face: FacePlace::by_rule(rule.side, rule.lift),
                 strength: 1.0,
                 detected: None,
                 search: None,
@@ -100,8 +107,10 @@ impl FaceRegion {
         if tracked.detected {
             self.counts.detections += 1;
         }
+        let crop = tracked.square.crop(width, height);
         Ok(Region {
-            crop: tracked.square.crop(width, height),
+            crop,
+            face: face_place(tracked.wanted, crop, self.tracker_settings.crop),
             strength: tracked.fade,
             detected: tracked.face.filter(|_| tracked.detected),
             search: tracked.detected.then_some(detector.last_search),

@@ -208,6 +208,9 @@ fn owned(buffer: &gst::Buffer, caps: &gst::CapsRef) -> Result<OwnedFrame, String
 pub struct Relit {
     /// The square relit.
     pub region: Region,
+    /// The face in it, as the element placed it (its `face-*` parameters;
+    /// where the meta came without them, [`Region::face_within`] the square).
+    pub face: Region,
     /// How much of the change showed, in [0, 1] (less while a face fades in
     /// or out), and the width of its fade beyond the square's inner circle,
     /// in pixels. None where the meta came without its parameters:
@@ -328,19 +331,31 @@ fn run(frames: &[RgbImage], middle: &str) -> Result<Vec<(OwnedFrame, Option<Reli
             Some(roi) => {
                 let (x, y, size, _) = roi.rect();
                 let field = |e: gst::structure::GetError<_>| format!("the face region's {e}");
-                let shown = match roi.param("lsydrelight") {
-                    None => None,
-                    Some(p) => Some((
-                        p.get::<f64>("strength").map_err(field)? as f32,
-                        p.get::<u32>("feather").map_err(field)? as usize,
-                    )),
+                let region = Region {
+                    x: x as usize,
+                    y: y as usize,
+                    size: size as usize,
+                };
+                let (shown, face) = match roi.param("lsydrelight") {
+                    None => (None, region.face_within()),
+                    Some(p) => {
+                        let corner = |name| p.get::<i32>(name).map(|c| c.max(0) as usize);
+                        (
+                            Some((
+                                p.get::<f64>("strength").map_err(field)? as f32,
+                                p.get::<u32>("feather").map_err(field)? as usize,
+                            )),
+                            Region {
+                                x: corner("face-x").map_err(field)?,
+                                y: corner("face-y").map_err(field)?,
+                                size: p.get::<u32>("face-size").map_err(field)? as usize,
+                            },
+                        )
+                    }
                 };
                 Some(Relit {
-                    region: Region {
-                        x: x as usize,
-                        y: y as usize,
-                        size: size as usize,
-                    },
+                    region,
+                    face,
                     shown,
                 })
             }

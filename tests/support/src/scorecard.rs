@@ -43,7 +43,7 @@ pub struct Measured {
     /// the bar `tests/real_footage.rs` holds.
     pub unexplained_box_edge_max: f64,
     pub mottling_median: f64,
-    /// The same over the face alone ([`Region::face_within`] the relit square),
+    /// The same over the face alone (the face within the relit square, [`Relit::face`]),
     /// as issue 12 defines the measure; the square holds hair and room too.
     pub face_mottling_median: f64,
     /// The same counting the face's near-black pixels too ([`mottling_in_all`]).
@@ -116,15 +116,14 @@ const LUMA_BANDS: [f64; 3] = [8.0, 16.0, 64.0];
 type MottlingByLuma = (f64, Vec<(f64, f64)>);
 
 /// Per band of input luma (median over the frames): its share of the face
-/// (the issue's measure: [`Region::face_within`] the relit square), its share
+/// (the issue's measure: the face within the relit square, `faces`), its share
 /// of the mottling's sum of squares and the mottling over its pixels alone.
-fn mottling_sources(input: &[View], output: &[View], regions: &[Region]) -> String {
+fn mottling_sources(input: &[View], output: &[View], faces: &[Region]) -> String {
     let frames: Vec<MottlingByLuma> = input
         .iter()
         .zip(output)
-        .zip(regions)
-        .map(|((i, o), &r)| {
-            let face = r.face_within();
+        .zip(faces)
+        .map(|((i, o), &face)| {
             (
                 mottling_in_all(i, o, face),
                 mottling_by_luma(i, o, face, &LUMA_BANDS),
@@ -244,12 +243,21 @@ pub fn measure(
         ))
     };
     let input = through(&input, format)?;
-    // The face measures look at the square the element relit.
-    let regions: Vec<Region> = relits
+    // The measures look at the square the element relit (its part inside
+    // the frame) and the face within it.
+    let (regions, faces): (Vec<Region>, Vec<Region>) = relits
         .iter()
         .zip(&input)
-        .map(|(r, frame)| r.map_or_else(|| centred_square(frame), |r| r.region))
-        .collect();
+        .map(|(r, frame)| {
+            r.map_or_else(
+                || {
+                    let square = centred_square(frame);
+                    (square, square.face_within())
+                },
+                |r| (r.region, r.face),
+            )
+        })
+        .unzip();
     // What the lighting change was applied to: the input, or the input as
     // the denoising left it.
     let changed = if setup.denoise {
@@ -267,6 +275,7 @@ pub fn measure(
             &read(&input, View::colour),
             &read(&changed, View::colour),
             &regions,
+            &faces,
         )
         .1;
         (edge, median(face_mottled))
@@ -301,15 +310,19 @@ pub fn measure(
         .fold(0.0, f64::max);
     let (changed_colour, output_colour) =
         (read(&changed, View::colour), read(&output, View::colour));
-    let (mottled, face_mottled) = mottlings(&changed_colour, &output_colour, &regions);
+    let (mottled, face_mottled) = mottlings(&changed_colour, &output_colour, &regions, &faces);
     let through_format = through_format.map(|(i, o)| {
         let edge = read(&i, View::brightness)
             .iter()
             .zip(&read(&o, View::brightness))
             .map(|(i, o)| box_edge_score(i, o))
             .fold(0.0, f64::max);
-        let (mottled, face_mottled) =
-            mottlings(&read(&i, View::colour), &read(&o, View::colour), &regions);
+        let (mottled, face_mottled) = mottlings(
+            &read(&i, View::colour),
+            &read(&o, View::colour),
+            &regions,
+            &faces,
+        );
         (edge, median(mottled), median(face_mottled))
     });
     let input_colour = read(&input, View::colour);
@@ -345,7 +358,7 @@ pub fn measure(
     );
     deskstage::io::write_png(&image, &map).map_err(|e| format!("{}: {e}", image.display()))?;
     Ok(Measured {
-        mottling_sources: mottling_sources(&changed_colour, &output_colour, &regions),
+        mottling_sources: mottling_sources(&changed_colour, &output_colour, &faces),
         through_format,
         denoising,
         worst,
@@ -358,8 +371,8 @@ pub fn measure(
         mottling_median: median(mottled),
         face_mottling_median: median(face_mottled),
         face_mottling_in_all_median: median(
-            (output_colour.iter().zip(&changed_colour).zip(&regions))
-                .map(|((o, i), r)| mottling_in_all(i, o, r.face_within()))
+            (output_colour.iter().zip(&changed_colour).zip(&faces))
+                .map(|((o, i), &face)| mottling_in_all(i, o, face))
                 .collect(),
         ),
         pumping: pumping(&means),
@@ -367,13 +380,18 @@ pub fn measure(
 }
 
 /// Per frame, the mottling of `output` against `input` over the relit square
-/// (`regions`) and over the face within it.
-fn mottlings(input: &[View], output: &[View], regions: &[Region]) -> (Vec<f64>, Vec<f64>) {
+/// (`regions`) and over the face within it (`faces`).
+fn mottlings(
+    input: &[View],
+    output: &[View],
+    regions: &[Region],
+    faces: &[Region],
+) -> (Vec<f64>, Vec<f64>) {
     input
         .iter()
         .zip(output)
-        .zip(regions)
-        .map(|((i, o), &r)| (mottling(i, o, r), mottling(i, o, r.face_within())))
+        .zip(regions.iter().zip(faces))
+        .map(|((i, o), (&r, &face))| (mottling(i, o, r), mottling(i, o, face)))
         .unzip()
 }
 

@@ -3,18 +3,18 @@
     python -m lsyd.evaluation.real_direction --models ../models/starter ../models/starter-next
         [--out ../results/direction/network.md]
 
-`examples/target_lights direction` measures the key swap of the element's output; this measures
-the network's own output on the same real footage (the astronaut as a 720p still and the film
-clip's first frames, from ``scripts/setup.sh full``), so the two together say whether a weak swap
-is the model's or the paste's. Each frame is cropped as the element crops it (BlazeFace's box and
-the model's crop rule), area-resampled to the model's resolution and relit with the source light
-predicted (no monitor stream) to two side keys of this module's own: a warm screen lit over its
-left quarter and a cool one over its right (the colours of the `warm-key-left` and
-`cool-key-right` presets; their screens fade more softly).
+`examples/target_lights direction` measures the key swap of the element's output; this measures the
+network's own output on the same real footage (the astronaut as a 720p still and the film clip's
+first frames, from ``scripts/setup.sh full``), so the two together say whether a weak swap is the
+model's or the paste's. Each frame is cropped as the element crops it (BlazeFace's box and the
+model's crop rule, the square moved to lie inside the frame), area-resampled to the model's
+resolution and relit with the source light predicted (no monitor stream) to two side keys of this
+module's own: a warm screen lit over its left quarter and a cool one over its right (the colours of
+the `warm-key-left` and `cool-key-right` presets; their screens fade more softly).
 
-Over the face's box in the crop (one face height square), with the element's measure
-(``lsydrelight_testkit::direction``): strength, the RMS of 100 ln((Y_out + 10) / (Y_in + 10))
-(Y Rec. 709 luma in 0-255); asymmetry, its mean over the image-left half less the image-right
+Over the face's box in the crop (one face height square about the face's centre), with the element's
+measure (``lsydrelight_testkit::direction``): strength, the RMS of 100 ln((Y_out + 10) / (Y_in +
+10)) (Y Rec. 709 luma in 0-255); asymmetry, its mean over the image-left half less the image-right
 half; key swap, the warm key's asymmetry less the cool key's. Medians over the frames.
 """
 
@@ -104,24 +104,25 @@ class Detector:
         return max(faces, key=lambda f: (f["box"][2] - f["box"][0]) * (f["box"][3] - f["box"][1]))["box"]
 
 
-def crop(frame: np.ndarray, box: list[float], rule: dict, resolution: int) -> np.ndarray:
-    """The model's square round the face (edges continued past the frame), in [0, 1], resolution²."""
+def crop(frame: np.ndarray, box: list[float], rule: dict, resolution: int) -> tuple[np.ndarray, tuple[slice, slice]]:
+    """The model's square round the face, moved (and no larger than the frame's shorter side) to
+    lie inside the frame as the element's tracker keeps it, in [0, 1], resolution²; and the rows
+    and columns of it that hold the face: one face height square about the face's centre, higher
+    in the square where the square was moved down."""
+    height, width = frame.shape[:2]
     face_height = box[3] - box[1]
-    side = round(rule["side"] * face_height)
-    centre_x, centre_y = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2 - rule["lift"] * face_height
-    x0, y0 = round(centre_x - side / 2), round(centre_y - side / 2)
-    padded = np.pad(frame, ((side, side), (side, side), (0, 0)), mode="edge")
-    square = padded[y0 + side : y0 + 2 * side, x0 + side : x0 + 2 * side]
-    return area_resize(square[None].astype(np.float32) / 255.0, resolution)[0]
-
-
-def face_box(rule: dict, resolution: int) -> tuple[slice, slice]:
-    """Rows and columns of the crop that hold the face: one face height square about its centre."""
-    face = resolution / rule["side"]
-    centre_y = resolution / 2 + rule["lift"] * face
-    rows = slice(round(centre_y - face / 2), round(centre_y + face / 2))
-    columns = slice(round(resolution / 2 - face / 2), round(resolution / 2 + face / 2))
-    return rows, columns
+    side = min(round(rule["side"] * face_height), height, width)
+    face_x, face_y = (box[0] + box[2]) / 2, (box[1] + box[3]) / 2
+    x0 = min(max(round(face_x - side / 2), 0), width - side)
+    y0 = min(max(round(face_y - rule["lift"] * face_height - side / 2), 0), height - side)
+    square = frame[y0 : y0 + side, x0 : x0 + side]
+    image = area_resize(square[None].astype(np.float32) / 255.0, resolution)[0]
+    scale = resolution / side
+    half = face_height * scale / 2
+    centre_x, centre_y = (face_x - x0) * scale, (face_y - y0) * scale
+    rows = slice(round(centre_y - half), round(centre_y + half))
+    columns = slice(round(centre_x - half), round(centre_x + half))
+    return image, (rows, columns)
 
 
 def shape(before: np.ndarray, after: np.ndarray, box: tuple[slice, slice]) -> tuple[float, float]:
@@ -135,13 +136,12 @@ def shape(before: np.ndarray, after: np.ndarray, box: tuple[slice, slice]) -> tu
 def measure(model: Path, frames: list[np.ndarray], detector: Detector) -> dict[str, float]:
     net, cfg = runs.load_saved_network(model / "network.pt")
     rule = contract.read(model / "model.json")["crop"]
-    box = face_box(rule, cfg.resolution)
     swaps, strengths = [], []
     for frame in frames:
         found = detector.box(frame)
         if found is None:
             continue
-        image = crop(frame, found, rule, cfg.resolution)
+        image, box = crop(frame, found, rule, cfg.resolution)
         tensor = torch.from_numpy(image.transpose(2, 0, 1).copy())[None]
         shapes = []
         for key in (side_key(WARM, left=True), side_key(COOL, left=False)):
