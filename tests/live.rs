@@ -319,6 +319,9 @@ struct Run {
     min_in_time: Option<f64>,
     /// The share of frames the sinks may drop for lateness after the first WARM_UP.
     max_dropped: f64,
+    /// Whether the element must keep denoising: a camera it can afford does
+    /// not lose it to the element's overload guard.
+    keeps_denoising: bool,
 }
 
 impl Run {
@@ -441,6 +444,7 @@ impl Run {
             stats,
             min_in_time: None,
             max_dropped: DROPPED_SHARE,
+            keeps_denoising: true,
         }
     }
 
@@ -534,6 +538,9 @@ impl Run {
                 "only {in_time} of {frames} frames relit in time; {reused} were late and \
                  reused the last relighting"
             ));
+        }
+        if self.keeps_denoising && self.stats.get::<bool>("denoising-dropped").unwrap() {
+            late.push("frames cost so much of their period that the denoising was dropped".into());
         }
         match &self.overload {
             Some(why) if !late.is_empty() => eprintln!(
@@ -678,9 +685,24 @@ fn live_seconds() -> u64 {
 fn a_1080p_and_a_2160p_camera_keep_real_time_at_30_fps() {
     let _alone = ONE_AT_A_TIME.lock().unwrap_or_else(|p| p.into_inner());
     let recipe = recipe("high-resolution");
-    for (width, height, screen, min_in_time, max_dropped) in [
-        (1920, 1080, FULL_HD_TEST_SCREEN, Some(0.95), DROPPED_SHARE),
-        (3840, 2160, SMALL_TEST_SCREEN, None, DROPPED_SHARE_AT_LIMIT),
+    // 2160p on 2 cores cannot afford the denoising: the element drops it.
+    for (width, height, screen, min_in_time, max_dropped, keeps_denoising) in [
+        (
+            1920,
+            1080,
+            FULL_HD_TEST_SCREEN,
+            Some(0.95),
+            DROPPED_SHARE,
+            true,
+        ),
+        (
+            3840,
+            2160,
+            SMALL_TEST_SCREEN,
+            None,
+            DROPPED_SHARE_AT_LIMIT,
+            false,
+        ),
     ] {
         let pipeline = stand_ins(
             &recipe,
@@ -705,6 +727,7 @@ fn a_1080p_and_a_2160p_camera_keep_real_time_at_30_fps() {
         );
         run.min_in_time = min_in_time;
         run.max_dropped = max_dropped;
+        run.keeps_denoising = keeps_denoising;
         run.check();
     }
 }

@@ -601,7 +601,9 @@ impl AggregatorImpl for LsydRelight {
         }
         let started = Instant::now();
         self.sync_controlled(&face);
-        let settings = self.settings();
+        let mut settings = self.settings();
+        // A live stream that could not afford the denoising runs without it.
+        settings.denoise &= !self.qos.denoising_dropped();
         let face_rt = running_time(&self.face_pad, face.pts());
         let Some((source, monitor_rt)) = self.source_light(face_rt, timeout, &settings) else {
             return Err(gst_base::AGGREGATOR_FLOW_NEED_DATA);
@@ -649,6 +651,26 @@ impl AggregatorImpl for LsydRelight {
         let frame_time = started.elapsed();
         if !late {
             self.qos.record_full_cost(frame_time);
+            if settings.denoise && settings.qos && self.qos.drops_denoising(out.duration()) {
+                let cost = self.qos.judged_cost().unwrap_or_default();
+                gst::info!(
+                    CAT,
+                    imp = self,
+                    "frames cost {cost:?} at the median: denoising dropped"
+                );
+                self.count(|st| st.denoising_dropped = true);
+                gst::element_imp_warning!(
+                    self,
+                    gst::CoreError::Clock,
+                    (
+                        "Frames take {:.1} ms at the median, too much of their period to keep real time: the denoising is off for this stream",
+                        cost.as_secs_f64() * 1e3
+                    ),
+                    [
+                        "Set denoise=false to start without it, ask the camera for a smaller size, or free the CPU; new caps try it again."
+                    ]
+                );
+            }
         }
         let frame_seconds = frame_time.as_secs_f64();
         self.count(|st| st.stages.frame += frame_seconds);

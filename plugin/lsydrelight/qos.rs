@@ -1,6 +1,7 @@
 //! Quality of service: whether a face frame is already late, from the clock in
-//! live pipelines and from downstream's QoS events, and the QoS message the
-//! element posts for a frame it could only give a reused relighting.
+//! live pipelines and from downstream's QoS events; whether a live stream's
+//! frames cost so much of their period that the denoising must go; and the QoS
+//! message the element posts for a frame it could only give a reused relighting.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -15,6 +16,11 @@ const ASSUMED_FRAME: gst::ClockTime = gst::ClockTime::from_mseconds(33);
 /// Weight of the latest frame in the running estimate of what a frame costs in full.
 const COST_WEIGHT: f64 = 0.1;
 
+/// Frames not found late over which a live stream's cost is judged: its
+/// median over this many (3 s at 30 fps), so that the network's warm-up and
+/// a busy moment do not count.
+const JUDGED_OVER: usize = 90;
+
 #[derive(Default)]
 pub struct Qos {
     /// Downstream's earliest useful running time, from its QoS events.
@@ -23,7 +29,18 @@ pub struct Qos {
     live: AtomicBool,
     /// What a frame not found late (relit, carried or passed through) has
     /// cost lately: an exponential average of their times in the element.
-    full_cost: Mutex<Option<Duration>>,
+    full_cost: Mutex<FullCost>,
+    /// Whether this stream's frames have shown they cannot afford the denoising.
+    denoising_dropped: AtomicBool,
+}
+
+#[derive(Default)]
+struct FullCost {
+    average: Option<Duration>,
+    /// The costs of the frames since the last judgement, up to [`JUDGED_OVER`].
+    window: Vec<Duration>,
+    /// The median of the last full window.
+    median: Option<Duration>,
 }
 
 impl Qos {
@@ -32,24 +49,76 @@ impl Qos {
         self.forget_cost();
     }
 
-    /// Forgets what frames cost: new caps change it.
+    /// Forgets what frames cost, and whether they could afford the denoising:
+    /// new caps change both.
     pub fn forget_cost(&self) {
-        *self.full_cost.lock().unwrap_or_else(|p| p.into_inner()) = None;
+        *self.full_cost.lock().unwrap_or_else(|p| p.into_inner()) = FullCost::default();
+        self.denoising_dropped.store(false, Ordering::Relaxed);
     }
 
     /// Takes the time a frame not found late took, for [`Qos::is_late`]'s
     /// estimate of when the next would be done.
     pub fn record_full_cost(&self, cost: Duration) {
-        let mut average = self.full_cost.lock().unwrap_or_else(|p| p.into_inner());
-        *average = Some(match *average {
+        let mut full = self.full_cost.lock().unwrap_or_else(|p| p.into_inner());
+        full.average = Some(match full.average {
             Some(a) => a.mul_f64(1.0 - COST_WEIGHT) + cost.mul_f64(COST_WEIGHT),
             None => cost,
         });
+        full.window.push(cost);
+        if full.window.len() == JUDGED_OVER {
+            full.window.sort_unstable();
+            full.median = Some(full.window[JUDGED_OVER / 2]);
+            full.window.clear();
+        }
     }
 
     /// The estimate of what a frame not found late costs; zero before any.
     pub fn full_cost(&self) -> Duration {
-        (*self.full_cost.lock().unwrap_or_else(|p| p.into_inner())).unwrap_or_default()
+        self.full_cost
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .average
+            .unwrap_or_default()
+    }
+
+    /// Whether a live stream whose frames last `duration` has just been found
+    /// unable to afford the denoising: true once, when the median frame not
+    /// found late, over the last [`JUDGED_OVER`], cost more than that, so that
+    /// most frames fall behind and only QoS's reuse keeps real time. The
+    /// denoising is what can go without changing the light: half of a 2160p
+    /// frame's time on 2 cores, where the median frame then took 42 ms of its
+    /// 33 (1080p: 12-28 ms, `cargo test --release --test live a_1080p`). From then [`Qos::denoising_dropped`] holds
+    /// until new caps or a restart: a stream that dropped it does not take it
+    /// back and forth, which would show its noise come and go.
+    pub fn drops_denoising(&self, duration: Option<gst::ClockTime>) -> bool {
+        if !self.is_live() || self.denoising_dropped() {
+            return false;
+        }
+        let period = Duration::from(duration.unwrap_or(ASSUMED_FRAME));
+        let overloaded = self
+            .full_cost
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .median
+            .is_some_and(|m| m > period);
+        if overloaded {
+            self.denoising_dropped.store(true, Ordering::Relaxed);
+        }
+        overloaded
+    }
+
+    /// The median cost of the last [`JUDGED_OVER`] frames not found late, once
+    /// that many have been.
+    pub fn judged_cost(&self) -> Option<Duration> {
+        self.full_cost
+            .lock()
+            .unwrap_or_else(|p| p.into_inner())
+            .median
+    }
+
+    /// Whether this stream has dropped the denoising ([`Qos::drops_denoising`]).
+    pub fn denoising_dropped(&self) -> bool {
+        self.denoising_dropped.load(Ordering::Relaxed)
     }
 
     pub fn set_live(&self, live: bool) {
@@ -150,5 +219,56 @@ mod tests {
         assert_eq!(qos.full_cost(), Duration::from_millis(40));
         qos.reset();
         assert_eq!(qos.full_cost(), Duration::ZERO);
+    }
+
+    #[test]
+    fn a_live_stream_that_cannot_afford_the_denoising_drops_it_once() {
+        let period = Some(gst::ClockTime::from_mseconds(33));
+        let qos = Qos::default();
+        qos.set_live(true);
+        // 2160p on 2 cores: most frames take more than the period, after a slow start.
+        qos.record_full_cost(Duration::from_millis(900));
+        for _ in 1..JUDGED_OVER - 1 {
+            qos.record_full_cost(Duration::from_millis(42));
+            assert!(
+                !qos.drops_denoising(period),
+                "judged before a window was full"
+            );
+        }
+        qos.record_full_cost(Duration::from_millis(42));
+        assert!(qos.drops_denoising(period));
+        assert!(qos.denoising_dropped());
+        // Said once; cheaper frames without it do not bring it back.
+        for _ in 0..JUDGED_OVER {
+            qos.record_full_cost(Duration::from_millis(5));
+        }
+        assert!(!qos.drops_denoising(period));
+        assert!(qos.denoising_dropped());
+        // New caps judge afresh.
+        qos.forget_cost();
+        assert!(!qos.denoising_dropped());
+    }
+
+    #[test]
+    fn a_stream_that_keeps_up_or_is_not_live_keeps_the_denoising() {
+        let live = Qos::default();
+        live.set_live(true);
+        // 1080p on 2 cores on a busy minute: a third of the frames run the
+        // network, and a few take longer than the period.
+        for frame in 0..10 * JUDGED_OVER {
+            let ms = match frame % 30 {
+                0..=5 => 60,
+                n if n % 3 == 0 => 30,
+                _ => 28,
+            };
+            live.record_full_cost(Duration::from_millis(ms));
+            assert!(!live.drops_denoising(None));
+        }
+        // Transcoding a file: slower than real time is only slower.
+        let file = Qos::default();
+        for _ in 0..10 * JUDGED_OVER {
+            file.record_full_cost(Duration::from_millis(100));
+            assert!(!file.drops_denoising(None));
+        }
     }
 }

@@ -460,7 +460,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("denoise")
                 .nick("Denoise the face")
-                .blurb("Take the camera's noise out of the detail round the face, over time, before relighting it: still detail is averaged over about 12 frames, moving detail taken as it is; the relit face then flickers less than the camera's picture. It runs beside the network, on the other core; frames late for QoS skip it. false keeps the frame's own detail, noise and all")
+                .blurb("Take the camera's noise out of the detail round the face, over time, before relighting it: still detail is averaged over about 12 frames, moving detail taken as it is; the relit face then flickers less than the camera's picture. It runs beside the network, on the other core; frames late for QoS skip it, and a live stream whose median frame costs more than its period drops it (with a warning) until new caps. false keeps the frame's own detail, noise and all")
                 .default_value(d.denoise)
                 .mutable_playing()
                 .build(),

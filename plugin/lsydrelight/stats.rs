@@ -20,6 +20,9 @@ pub struct Stats {
     /// seconds the copies took.
     pub frames_copied: u64,
     pub copy_seconds: f64,
+    /// Whether a live stream's frames proved too costly for the denoising,
+    /// which then stopped (`qos`).
+    pub denoising_dropped: bool,
     pub known_source: u64,
     pub predicted_source: u64,
     /// Frames without a monitor stream relit from `source-preset`'s light (counted
@@ -141,6 +144,7 @@ impl Stats {
             .field("denoise-seconds", self.denoise_seconds)
             .field("frames-copied", self.frames_copied)
             .field("copy-seconds", self.copy_seconds)
+            .field("denoising-dropped", self.denoising_dropped)
             .field("smoothing-seconds", p.filter_seconds)
             .field("change-seconds", p.change_seconds)
             .field("decide-seconds", decide.max(0.0))
