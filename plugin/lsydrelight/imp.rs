@@ -651,26 +651,7 @@ impl AggregatorImpl for LsydRelight {
         let frame_time = started.elapsed();
         if !late {
             self.qos.record_full_cost(frame_time);
-            if settings.denoise && settings.qos && self.qos.drops_denoising(out.duration()) {
-                let cost = self.qos.judged_cost().unwrap_or_default();
-                gst::info!(
-                    CAT,
-                    imp = self,
-                    "frames cost {cost:?} at the median: denoising dropped"
-                );
-                self.count(|st| st.denoising_dropped = true);
-                gst::element_imp_warning!(
-                    self,
-                    gst::CoreError::Clock,
-                    (
-                        "Frames take {:.1} ms at the median, too much of their period to keep real time: the denoising is off for this stream",
-                        cost.as_secs_f64() * 1e3
-                    ),
-                    [
-                        "Set denoise=false to start without it, ask the camera for a smaller size, or free the CPU; new caps try it again."
-                    ]
-                );
-            }
+            self.judge_denoising(&settings, out.duration());
         }
         let frame_seconds = frame_time.as_secs_f64();
         self.count(|st| st.stages.frame += frame_seconds);

@@ -20,6 +20,33 @@ use crate::frame::FrameMut;
 use crate::light::Light;
 
 impl LsydRelight {
+    /// After a frame not found late: drops the denoising for the rest of a
+    /// live stream whose frames cannot afford it ([`super::qos::Qos::drops_denoising`]),
+    /// and says so.
+    pub(super) fn judge_denoising(&self, settings: &Settings, duration: Option<gst::ClockTime>) {
+        if !(settings.denoise && settings.qos && self.qos.drops_denoising(duration)) {
+            return;
+        }
+        let cost = self.qos.judged_cost().unwrap_or_default();
+        gst::info!(
+            CAT,
+            imp = self,
+            "frames cost {cost:?} at the median: denoising dropped"
+        );
+        self.count(|st| st.denoising_dropped = true);
+        gst::element_imp_warning!(
+            self,
+            gst::CoreError::Clock,
+            (
+                "Frames take {:.1} ms at the median, more than their period: the denoising is off for this stream to keep real time",
+                cost.as_secs_f64() * 1e3
+            ),
+            [
+                "Set denoise=false to start without it, ask the camera for a smaller size, or free the CPU; new caps try it again."
+            ]
+        );
+    }
+
     pub(super) fn engine_failed(&self, e: engine::EngineError) -> gst::FlowError {
         gst::element_imp_error!(self, gst::StreamError::Failed, ("Relighting failed: {}", e));
         gst::FlowError::Error
