@@ -24,10 +24,12 @@ impl LsydRelight {
     /// live stream whose frames cannot afford it ([`super::qos::Qos::drops_denoising`]),
     /// and says so.
     pub(super) fn judge_denoising(&self, settings: &Settings, duration: Option<gst::ClockTime>) {
-        if !(settings.denoise && settings.qos && self.qos.drops_denoising(duration)) {
+        if !(settings.denoise && settings.qos) {
             return;
         }
-        let cost = self.qos.judged_cost().unwrap_or_default();
+        let Some(cost) = self.qos.drops_denoising(duration) else {
+            return;
+        };
         gst::info!(
             CAT,
             imp = self,

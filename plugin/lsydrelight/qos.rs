@@ -82,38 +82,29 @@ impl Qos {
     }
 
     /// Whether a live stream whose frames last `duration` has just been found
-    /// unable to afford the denoising: true once, when the median frame not
-    /// found late, over the last [`JUDGED_OVER`], cost more than that, so that
-    /// most frames fall behind and only QoS's reuse keeps real time. The
-    /// denoising is what can go without changing the light: half of a 2160p
-    /// frame's time on 2 cores, where the median frame then took 42 ms of its
-    /// 33 (1080p: 12-28 ms, `cargo test --release --test live a_1080p`). From then [`Qos::denoising_dropped`] holds
-    /// until new caps or a restart: a stream that dropped it does not take it
-    /// back and forth, which would show its noise come and go.
-    pub fn drops_denoising(&self, duration: Option<gst::ClockTime>) -> bool {
+    /// unable to afford the denoising, and the median cost that showed it:
+    /// once, when the median frame not found late, over the last
+    /// [`JUDGED_OVER`], cost more than that, so that most frames fall behind
+    /// and only QoS's reuse keeps real time. The denoising is what can go
+    /// without changing the light: half of a 2160p frame's time on 2 cores,
+    /// where the median frame then took 42 ms of its 33 (1080p: 11-24 ms in a
+    /// run that printed them, `cargo test --release --test live a_1080p`).
+    /// From then [`Qos::denoising_dropped`] holds until new caps or a restart:
+    /// a stream that dropped it does not take it back and forth, which would
+    /// show its noise come and go.
+    pub fn drops_denoising(&self, duration: Option<gst::ClockTime>) -> Option<Duration> {
         if !self.is_live() || self.denoising_dropped() {
-            return false;
+            return None;
         }
         let period = Duration::from(duration.unwrap_or(ASSUMED_FRAME));
-        let overloaded = self
+        let median = self
             .full_cost
             .lock()
             .unwrap_or_else(|p| p.into_inner())
             .median
-            .is_some_and(|m| m > period);
-        if overloaded {
-            self.denoising_dropped.store(true, Ordering::Relaxed);
-        }
-        overloaded
-    }
-
-    /// The median cost of the last [`JUDGED_OVER`] frames not found late, once
-    /// that many have been.
-    pub fn judged_cost(&self) -> Option<Duration> {
-        self.full_cost
-            .lock()
-            .unwrap_or_else(|p| p.into_inner())
-            .median
+            .filter(|m| *m > period)?;
+        self.denoising_dropped.store(true, Ordering::Relaxed);
+        Some(median)
     }
 
     /// Whether this stream has dropped the denoising ([`Qos::drops_denoising`]).
@@ -231,18 +222,18 @@ mod tests {
         for _ in 1..JUDGED_OVER - 1 {
             qos.record_full_cost(Duration::from_millis(42));
             assert!(
-                !qos.drops_denoising(period),
+                qos.drops_denoising(period).is_none(),
                 "judged before a window was full"
             );
         }
         qos.record_full_cost(Duration::from_millis(42));
-        assert!(qos.drops_denoising(period));
+        assert_eq!(qos.drops_denoising(period), Some(Duration::from_millis(42)));
         assert!(qos.denoising_dropped());
         // Said once; cheaper frames without it do not bring it back.
         for _ in 0..JUDGED_OVER {
             qos.record_full_cost(Duration::from_millis(5));
         }
-        assert!(!qos.drops_denoising(period));
+        assert!(qos.drops_denoising(period).is_none());
         assert!(qos.denoising_dropped());
         // New caps judge afresh.
         qos.forget_cost();
@@ -262,13 +253,13 @@ mod tests {
                 _ => 28,
             };
             live.record_full_cost(Duration::from_millis(ms));
-            assert!(!live.drops_denoising(None));
+            assert!(live.drops_denoising(None).is_none());
         }
         // Transcoding a file: slower than real time is only slower.
         let file = Qos::default();
         for _ in 0..10 * JUDGED_OVER {
             file.record_full_cost(Duration::from_millis(100));
-            assert!(!file.drops_denoising(None));
+            assert!(file.drops_denoising(None).is_none());
         }
     }
 }
