@@ -85,8 +85,8 @@ fn presets_are_listed_and_relight_as_named() {
         e.set_property_from_str("target-preset", nick);
         out.push(relight(&mut h, &c, i as u64));
     }
-    // The shipped starter model renders a light's colour and brightness more than
-    // its direction: a warm key warms the face, a cool one cools it.
+    // A light's colour shows: a warm key warms the face, a cool one cools it
+    // (its side is held on real faces by `tests/real_footage.rs`).
     assert!(
         warmth(&out[0]) > warmth(&out[1]) + 3.0,
         "warm key left {:.1}, cool key right {:.1}",
