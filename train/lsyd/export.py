@@ -170,18 +170,23 @@ def network_from_model(folder: Path) -> model.LcfnNet:
     convolution's layout (``optimise.original_parameter``). Lets the benchmark time PyTorch on
     the very network it times in ONNX Runtime, without the run."""
     m = contract.read(folder / "model.json")
-    net = model.build(model.NetConfig(resolution=m["resolution"], width=m["widths"][1] / model.PAPER_WIDTHS[1]))
+    initializers = [
+        t for stage in contract.STAGES for t in onnx.load(folder / contract.stage_file(stage)).graph.initializer
+    ]
+    # The manifest does not say whether the decoder draws a light field; its weights do.
+    light_field = any(t.name.startswith("net.decoder.light_field.") for t in initializers)
+    width = m["widths"][1] / model.PAPER_WIDTHS[1]
+    net = model.build(model.NetConfig(resolution=m["resolution"], width=width, light_field=light_field))
     params = net.state_dict()
     state = {}
-    for stage in contract.STAGES:
-        for t in onnx.load(folder / contract.stage_file(stage)).graph.initializer:
-            name = t.name.removeprefix("net.")
-            if name not in params:
-                continue
-            value, shape = numpy_helper.to_array(t), tuple(params[name].shape)
-            if value.shape != shape:
-                value = optimise.original_parameter(value, shape)
-            state[name] = torch.from_numpy(value.copy())
+    for t in initializers:
+        name = t.name.removeprefix("net.")
+        if name not in params:
+            continue
+        value, shape = numpy_helper.to_array(t), tuple(params[name].shape)
+        if value.shape != shape:
+            value = optimise.original_parameter(value, shape)
+        state[name] = torch.from_numpy(value.copy())
     net.load_state_dict(state)  # strict: every parameter is in the stages
     return net.eval()
 

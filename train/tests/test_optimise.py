@@ -287,3 +287,16 @@ def test_stage_and_traffic_timings_cover_every_stage_and_size(shipped_model):
     after = benchmark.network_after_traffic(shipped_model, sizes_mb=(0, 1), threads=1, rounds=2)
     assert list(after) == [0, 1]
     assert all(0 < t["min"] <= t["median"] <= t["max"] for t in after.values())
+
+
+def test_a_light_field_model_is_rebuilt_from_its_stages_with_its_light_field(shipped_model):
+    # The starter's decoder draws a light field; a network rebuilt without it (the benchmark's
+    # peer, the light refit, the int8 check's reference) relit 0.017 from the model's own stages.
+    starter = shipped_model.parent / "starter"
+    net = export.network_from_model(starter)
+    assert net.decoder.light_field is not None
+    image, source, target = benchmark.portrait_frame(contract.read(starter / "model.json")["resolution"])
+    ref = export.reference_run(net, *(torch.from_numpy(x) for x in (image, source, target)))
+    chain = contract.StageChain(starter)
+    relit = chain.relight(ref["image"], ref["light"], chain.light_code(ref["target_light"]))
+    assert float(np.abs(relit - ref["relit"]).max()) < 1e-4
