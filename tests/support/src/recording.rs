@@ -156,6 +156,7 @@ fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
             .get::<u64>()
             .map(serde_json::Value::from)
             .or_else(|_| v.get::<f64>().map(serde_json::Value::from))
+            .or_else(|_| v.get::<bool>().map(serde_json::Value::from))
             .unwrap_or(serde_json::Value::Null);
         m.insert(k.to_string(), n);
     }
