@@ -242,7 +242,7 @@ fn a_person_walking_about_the_simulated_room_is_relit_without_a_box() {
 fn a_real_portrait_relit_to_neon_changes_visibly() {
     // A relighting must show. The astronaut's face, framed as a 720p webcam
     // would (her hair near the top edge), relit to `neon` by the starter
-    // model: 3.0% (RMS of the change over the face, `examples/target_lights
+    // model: 3.3% (RMS of the change over the face, `examples/target_lights
     // direction`) with the default source, which adds the target's light to
     // the studio light already on her face; 12.2% with `source-preset=
     // soft-front`, which replaces a frontal light. (Until the element said
