@@ -27,6 +27,7 @@ seconds=${STARTER_SECONDS:-30}
 steps=${STARTER_STEPS:-3000}
 train_people=$(seq 100 131)
 unseen_people=$(seq 200 207)
+py=$PWD/.venv/bin/python
 
 cargo build --release -p deskstage
 stage=target/release/deskstage
@@ -51,39 +52,34 @@ for person in $unseen_people; do
     "$stage" heldout --subject "$person" --stage dome --out "$data/unseen-dome/person-$person"
 done
 
-if [ ! -f "$run/done" ]; then
-  resume=()
-  [ -f "$run/checkpoint.pt" ] && resume=(--resume)
-  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$run" --steps "$steps" \
-    --resolution 96 --light-field --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
-  touch "$run/done"
-fi
-long_run="$run-long"
-if [ ! -f "$long_run/done" ]; then
-  [ -f "$run/network.pt" ] || (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out "../$run/network.pt")
-  resume=()
-  [ -f "$long_run/checkpoint.pt" ] && resume=(--resume)
-  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$long_run" --steps 6000 \
-    --init "../$run/network.pt" --delit-consistency 0.1 --monitor-colour 1.0 "${resume[@]}")
-  touch "$long_run/done"
-fi
-run=$long_run
-change_run="$run-change"
-if [ ! -f "$change_run/done" ]; then
-  [ -f "$run/network.pt" ] || (cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out "../$run/network.pt")
-  resume=()
-  [ -f "$change_run/checkpoint.pt" ] && resume=(--resume)
-  (cd train && ../.venv/bin/python -m lsyd.train --data "../$data" --out "../$change_run" --steps 1500 \
-    --init "../$run/network.pt" --delit-consistency 0.1 --monitor-colour 1.0 --change 1.0 "${resume[@]}")
-  touch "$change_run/done"
-fi
-run=$change_run
+losses=(--delit-consistency 0.1 --monitor-colour 1.0)
+# Trains the run folder $1 on the data folder $2 with lsyd.train's further arguments,
+# resuming from its checkpoint; skipped once done.
+train_stage() {
+  local out=$1 on=$2
+  shift 2
+  [ -f "$out/done" ] && return
+  local resume=()
+  [ -f "$out/checkpoint.pt" ] && resume=(--resume)
+  (cd train && "$py" -m lsyd.train --data "../$on" --out "../$out" "$@" "${resume[@]}")
+  touch "$out/done"
+}
+# The network a finished run trained (written once), as lsyd.train's --init from train/.
+network_of() {
+  [ -f "$1/network.pt" ] || (cd train && "$py" -m lsyd.runs save-network --run "../$1" --out "../$1/network.pt" >&2)
+  echo "../$1/network.pt"
+}
+
+train_stage "$run" "$data" --steps "$steps" --resolution 96 --light-field "${losses[@]}"
+train_stage "$run-long" "$data" --steps 6000 --init "$(network_of "$run")" "${losses[@]}"
+train_stage "$run-long-change" "$data" --steps 1500 --init "$(network_of "$run-long")" "${losses[@]}" --change 1.0
+run=$run-long-change
 
 # Export: the contract's stages (checked against PyTorch on a stranger's held-out frames),
 # the saved network personal models fine-tune from, and the test on strangers.
 [ -e "$data/heldout" ] || ln -s unseen/person-200 "$data/heldout"
-(cd train && ../.venv/bin/python -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter-next --name starter-next)
-(cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$run" --out ../models/starter-next/network.pt)
+(cd train && "$py" -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter-next --name starter-next)
+(cd train && "$py" -m lsyd.runs save-network --run "../$run" --out ../models/starter-next/network.pt)
 
 # The fourth stage: the desk sessions alone, from starter-next's weights.
 desk="$data-desk"
@@ -93,15 +89,9 @@ for person in $train_people; do
 done
 [ -e "$desk/heldout" ] || ln -s "../$(basename "$data")/heldout" "$desk/heldout"
 desk_run="$run-desk"
-if [ ! -f "$desk_run/done" ]; then
-  resume=()
-  [ -f "$desk_run/checkpoint.pt" ] && resume=(--resume)
-  (cd train && ../.venv/bin/python -m lsyd.train --data "../$desk" --out "../$desk_run" --steps 1500 --lr 6e-5 \
-    --init ../models/starter-next/network.pt --delit-consistency 0.1 --monitor-colour 1.0 --change 1.0 "${resume[@]}")
-  touch "$desk_run/done"
-fi
-(cd train && ../.venv/bin/python -m lsyd.export --run "../$desk_run" --data "../$desk" --out ../models/starter --name starter)
-(cd train && ../.venv/bin/python -m lsyd.runs save-network --run "../$desk_run" --out ../models/starter/network.pt)
+train_stage "$desk_run" "$desk" --steps 1500 --lr 6e-5 --init ../models/starter-next/network.pt "${losses[@]}" --change 1.0
+(cd train && "$py" -m lsyd.export --run "../$desk_run" --data "../$desk" --out ../models/starter --name starter)
+(cd train && "$py" -m lsyd.runs save-network --run "../$desk_run" --out ../models/starter/network.pt)
 for stage in desk dome; do
-  (cd train && ../.venv/bin/python -m lsyd.evaluation.starter --data "../$data" --models ../models/starter ../models/starter-next --stage "$stage")
+  (cd train && "$py" -m lsyd.evaluation.starter --data "../$data" --models ../models/starter ../models/starter-next --stage "$stage")
 done
