@@ -85,6 +85,11 @@ def capture_dirs(root: Path) -> list[Path]:
     return dirs
 
 
+# Sessions whose folder name starts so are rehearsal: simulated people the starter trained on,
+# mixed into a personal run by ``lsydrelight train`` (cli/src/train/rehearsal.rs).
+REHEARSAL_PREFIX = "rehearsal-"
+
+
 @dataclasses.dataclass
 class PairSet:
     """Frames at network resolution, their lights, and (source, target) index pairs."""
@@ -92,11 +97,23 @@ class PairSet:
     images: torch.Tensor  # (N, 3, R, R) uint8
     lights: torch.Tensor  # (N, 3, 16, 32) float32
     pairs: torch.Tensor  # (P, 2) int64
+    # Per pair, whether it comes from a rehearsal session; None: none does.
+    rehearsed: torch.Tensor | None = None  # (P,) bool
 
     def batch(self, idx: torch.Tensor) -> tuple[torch.Tensor, ...]:
         p = self.pairs[idx]
         s, t = p[:, 0], p[:, 1]
         return self.images[s].float() / 255.0, self.lights[s], self.images[t].float() / 255.0, self.lights[t]
+
+    def draw(self, n: int, rehearsal_share: float | None, generator: torch.Generator) -> torch.Tensor:
+        """``n`` pair indices at random: uniformly, or with the rehearsal pairs drawn
+        ``rehearsal_share`` of the time whatever their number, when there are both kinds."""
+        rehearsed = self.rehearsed
+        if rehearsal_share is None or rehearsed is None or rehearsed.all() or not rehearsed.any():
+            return torch.randint(len(self.pairs), (n,), generator=generator)
+        counts = (rehearsed.sum(), (~rehearsed).sum())
+        weights = torch.where(rehearsed, rehearsal_share / counts[0], (1.0 - rehearsal_share) / counts[1])
+        return torch.multinomial(weights.double(), n, replacement=True, generator=generator)
 
 
 def resize_frames(frames: np.ndarray, resolution: int) -> np.ndarray:
@@ -132,7 +149,7 @@ def session_frames(session: Path, resolution: int) -> tuple[np.ndarray, np.ndarr
 
 def keypoint_pairs(root: Path, resolution: int, rule: pairing.PairingRule) -> tuple[PairSet, list[dict]]:
     """Pairs found by keypoints within each capture session, as on real captures."""
-    images, lights, pairs, reports = [], [], [], []
+    images, lights, pairs, rehearsed, reports = [], [], [], [], []
     offset = 0
     for d in capture_dirs(root):
         imgs, lit = session_frames(d, resolution)
@@ -144,12 +161,14 @@ def keypoint_pairs(root: Path, resolution: int, rule: pairing.PairingRule) -> tu
         images.append(imgs)
         lights.append(lit)
         pairs.append(p + offset)
+        rehearsed.append(np.full(len(p), d.name.startswith(REHEARSAL_PREFIX)))
         offset += len(imgs)
     return (
         PairSet(
             images=torch.from_numpy(np.concatenate(images)).permute(0, 3, 1, 2).contiguous(),
             lights=torch.from_numpy(np.concatenate(lights)),
             pairs=torch.from_numpy(np.concatenate(pairs)).long(),
+            rehearsed=torch.from_numpy(np.concatenate(rehearsed)),
         ),
         reports,
     )

@@ -78,6 +78,9 @@ class TrainConfig:
     # The decay of an exponential moving average of the generator's weights, kept beside them;
     # the run's trained network is then the average (``load_network``). 0: the last weights.
     weight_average: float = 0.0
+    # The share of the batches' pairs drawn from rehearsal sessions (``data.REHEARSAL_PREFIX``)
+    # whatever their number of pairs; None: every pair alike.
+    rehearsal_share: float | None = None
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -95,6 +98,7 @@ class TrainConfig:
             weights=LossWeights(**d["weights"]),
             init=d.get("init"),
             weight_average=d.get("weight_average", 0.0),
+            rehearsal_share=d.get("rehearsal_share"),
         )
 
 

@@ -47,11 +47,13 @@ def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
     for s in sets:
         pairs.append(s.pairs + offset)
         offset += len(s.images)
+    rehearsed = [s.rehearsed if s.rehearsed is not None else torch.zeros(len(s.pairs), dtype=torch.bool) for s in sets]
     return (
         data.PairSet(
             images=torch.cat([s.images for s in sets]),
             lights=torch.cat([s.lights for s in sets]),
             pairs=torch.cat(pairs),
+            rehearsed=torch.cat(rehearsed),
         ),
         reports,
     )
@@ -240,7 +242,7 @@ def train(
         end = min(cfg.steps, stop_at) if stop_at else cfg.steps
         try:
             while trainer.step < end:
-                idx = torch.randint(len(pairs.pairs), (cfg.batch,), generator=trainer.sampler)
+                idx = pairs.draw(cfg.batch, cfg.rehearsal_share, trainer.sampler)
                 terms = trainer.train_step(pairs.batch(idx))
                 bar.update(1)
                 if trainer.step % 20 == 0 or trainer.step == cfg.steps:

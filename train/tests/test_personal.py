@@ -75,6 +75,22 @@ def test_a_session_with_lights_npy_loads_and_pairs(tmp_path):
     assert pairs.images.shape == (12, 3, 32, 32)
 
 
+def test_rehearsal_pairs_are_drawn_at_their_share_however_many_they_are(tmp_path):
+    # One session of the person's own (6 frames, 6 pairs) beside a rehearsal session with
+    # four times the pairs: drawn uniformly, rehearsal would fill 80% of the batches.
+    write_session(tmp_path / "captures" / "capture-session-000", frames=6)
+    write_session(tmp_path / "captures" / f"{data.REHEARSAL_PREFIX}dome-100", frames=24, seed=1)
+    pairs, _ = data.keypoint_pairs(tmp_path / "captures", 32, pairing.PairingRule())
+    assert pairs.rehearsed.tolist() == [False] * 6 + [True] * 24
+    generator = torch.Generator().manual_seed(0)
+    uniform = pairs.rehearsed[pairs.draw(20_000, None, generator)].float().mean().item()
+    shared = pairs.rehearsed[pairs.draw(20_000, 0.2, generator)].float().mean().item()
+    assert uniform == pytest.approx(0.8, abs=0.02)
+    assert shared == pytest.approx(0.2, abs=0.02)
+    # Within each kind, every pair is drawn.
+    assert len(set(pairs.draw(20_000, 0.2, generator).tolist())) == 30
+
+
 def test_lights_npy_of_the_wrong_shape_is_refused(tmp_path):
     session = write_session(tmp_path / "s0")
     np.save(session / "lights.npy", np.zeros((11, 3, 16, 32), np.float32))

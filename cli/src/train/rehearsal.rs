@@ -7,7 +7,11 @@
 //! dome`). Fine-tuning on the captures alone would let the network forget
 //! them, so a few short dome sessions of people the starter trained on are
 //! rendered into the training data beside the person's own, and training
-//! pairs frames within them as within any session.
+//! pairs frames within them as within any session. The trainer knows them by
+//! their folder's name (`rehearsal-`, `lsyd.data.REHEARSAL_PREFIX`) and draws
+//! their pairs for a tenth of each batch however many they are
+//! (`lsyd.personal.REHEARSAL_SHARE`): drawn as often as the person's own, they
+//! made the model worse at the desk than the starter it began from.
 
 use std::path::Path;
 
