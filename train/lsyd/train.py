@@ -357,6 +357,12 @@ def main() -> None:
         default=TrainConfig.weight_average,
         help="keep an exponential moving average of the weights with this decay and use it (0: the last weights)",
     )
+    p.add_argument(
+        "--rehearsal-share",
+        type=float,
+        default=None,
+        help="draw the pairs of sessions named rehearsal-* for this share of each batch (default: as any pair)",
+    )
     p.add_argument("--pairs", default="keypoints", choices=["keypoints", "exact", "both"])
     p.add_argument("--max-keypoint-distance", type=float, default=pairing.PairingRule.max_keypoint_distance)
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
@@ -397,6 +403,7 @@ def main() -> None:
         ),
         init=str(a.init.resolve()) if a.init else None,
         weight_average=a.weight_average,
+        rehearsal_share=a.rehearsal_share,
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
     train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)

@@ -117,8 +117,9 @@ type MottlingByLuma = (f64, Vec<(f64, f64)>);
 
 /// Per band of input luma (median over the frames): its share of the face
 /// (the measure: the face within the relit square, `faces`), its share
-/// of the mottling's sum of squares and the mottling over its pixels alone.
-fn mottling_sources(input: &[View], output: &[View], faces: &[Region]) -> String {
+/// of the mottling's sum of squares and the mottling over its pixels alone;
+/// and the median mottling over every pixel of the face ([`mottling_in_all`]).
+fn mottling_sources(input: &[View], output: &[View], faces: &[Region]) -> (String, f64) {
     let frames: Vec<MottlingByLuma> = input
         .iter()
         .zip(output)
@@ -151,7 +152,7 @@ fn mottling_sources(input: &[View], output: &[View], faces: &[Region]) -> String
             )
         })
         .collect();
-    bands.join("; ")
+    (bands.join("; "), of(&|(m, _)| *m))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -357,8 +358,10 @@ pub fn measure(
         &View::brightness(output[shown].frame()),
     );
     deskstage::io::write_png(&image, &map).map_err(|e| format!("{}: {e}", image.display()))?;
+    let (mottling_sources, face_mottling_in_all_median) =
+        mottling_sources(&changed_colour, &output_colour, &faces);
     Ok(Measured {
-        mottling_sources: mottling_sources(&changed_colour, &output_colour, &faces),
+        mottling_sources,
         through_format,
         denoising,
         worst,
@@ -370,11 +373,7 @@ pub fn measure(
         box_edge_median: median(edges),
         mottling_median: median(mottled),
         face_mottling_median: median(face_mottled),
-        face_mottling_in_all_median: median(
-            (output_colour.iter().zip(&changed_colour).zip(&faces))
-                .map(|((o, i), &face)| mottling_in_all(i, o, face))
-                .collect(),
-        ),
+        face_mottling_in_all_median,
         pumping: pumping(&means),
     })
 }
