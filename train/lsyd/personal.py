@@ -35,7 +35,7 @@ from PIL import Image, ImageDraw
 from tqdm import tqdm
 
 from . import contract, data, export, landmarks, pairing, train
-from .runs import LossWeights, TrainConfig, load_network, read_network, save_run_network
+from .runs import LossWeights, TrainConfig, load_network, read_network, save_run_network, share
 
 # The loss weights of the starter model's last stage (and so of its fine-tuning): the
 # paper's, with the de-lit consistency, the monitor's mean colour and the lighting-change
@@ -386,7 +386,7 @@ def main() -> None:
     tr.add_argument("--lr", type=float, default=None, help=f"learning rate (default {FINE_TUNE_LR:g} fine-tuning)")
     tr.add_argument(
         "--rehearsal-share",
-        type=float,
+        type=share,
         default=REHEARSAL_SHARE,
         help="share of each batch's pairs drawn from the rehearsal sessions",
     )

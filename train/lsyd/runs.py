@@ -61,6 +61,17 @@ class LossWeights:
     coarse_change: float = 0.0
 
 
+def share(text: str) -> float:
+    """A command line's share (``--rehearsal-share``): a number from 0 to 1."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number; give a share from 0 to 1") from None
+    if not 0.0 <= value <= 1.0:
+        raise argparse.ArgumentTypeError(f"{value:g} is not a share; give a number from 0 to 1 (0.1: a tenth)")
+    return value
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """How a run trains: the network, the schedule, the pairs and the loss weights."""

@@ -30,7 +30,7 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
 from . import data, losses, model, pairing
-from .runs import LossWeights, TrainConfig, hardware, initial_weights, read_config, read_network
+from .runs import LossWeights, TrainConfig, hardware, initial_weights, read_config, read_network, share
 
 
 def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
@@ -359,7 +359,7 @@ def main() -> None:
     )
     p.add_argument(
         "--rehearsal-share",
-        type=float,
+        type=share,
         default=None,
         help="draw the pairs of sessions named rehearsal-* for this share of each batch (default: as any pair)",
     )

@@ -1,6 +1,7 @@
 """Personal models (``lsydrelight train``): the saved-network format, ``--init``, and the
 session format ``lsydrelight train`` prepares (``lights.npy`` instead of ``monitor.npy``)."""
 
+import argparse
 import json
 
 import numpy as np
@@ -89,6 +90,13 @@ def test_rehearsal_pairs_are_drawn_at_their_share_however_many_they_are(tmp_path
     assert shared == pytest.approx(0.2, abs=0.02)
     # Within each kind, every pair is drawn.
     assert len(set(pairs.draw(20_000, 0.2, generator).tolist())) == 30
+
+
+def test_a_share_outside_0_to_1_is_refused_with_what_to_give():
+    assert runs.share("0.1") == 0.1
+    for bad in ("1.5", "-0.1", "a tenth"):
+        with pytest.raises(argparse.ArgumentTypeError, match="from 0 to 1"):
+            runs.share(bad)
 
 
 def test_lights_npy_of_the_wrong_shape_is_refused(tmp_path):
