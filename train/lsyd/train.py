@@ -192,7 +192,12 @@ def train(
     if resume and config_path.exists():
         saved = read_config(run)
         if saved != cfg:
-            raise SystemExit(f"{run}: --resume with a different configuration than the run was started with")
+            was, now = saved.to_json(), cfg.to_json()
+            changed = ", ".join(f"{k} {was[k]} then, {now[k]} now" for k in now if was.get(k) != now[k])
+            raise SystemExit(
+                f"{run}: the run there was started with a different configuration ({changed}); "
+                f"to start it again with this one, remove {run}"
+            )
     config_path.write_text(json.dumps(cfg.to_json(), indent=2) + "\n")
 
     t0 = time.time()

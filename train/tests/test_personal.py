@@ -128,7 +128,8 @@ def test_training_from_a_saved_network_starts_from_its_weights_and_resumes(tmp_p
     train.train(cfg, tmp_path / "data", tmp_path / "tuned", True, 2, cpu)
     assert torch.load(tmp_path / "tuned" / "checkpoint.pt", weights_only=False)["step"] == 4
     assert json.loads((tmp_path / "tuned" / "config.json").read_text())["init"] == str(network)
-    with pytest.raises(SystemExit, match="different configuration"):
+    # Resumed with another configuration: refused, naming what changed and what to do.
+    with pytest.raises(SystemExit, match=r"different configuration \(init .* then, None now\); .* remove"):
         train.train(tiny_run(tmp_path, steps=4), tmp_path / "data", tmp_path / "tuned", True, 2, cpu)
     # A network of another configuration does not start a run of this one.
     other = model.NetConfig(resolution=48, width=0.125)
