@@ -97,8 +97,7 @@ class PairSet:
     images: torch.Tensor  # (N, 3, R, R) uint8
     lights: torch.Tensor  # (N, 3, 16, 32) float32
     pairs: torch.Tensor  # (P, 2) int64
-    # Per pair, whether it comes from a rehearsal session; None: none does.
-    rehearsed: torch.Tensor | None = None  # (P,) bool
+    rehearsed: torch.Tensor  # (P,) bool: the pair comes from a rehearsal session
 
     def batch(self, idx: torch.Tensor) -> tuple[torch.Tensor, ...]:
         p = self.pairs[idx]
@@ -109,7 +108,7 @@ class PairSet:
         """``n`` pair indices at random: uniformly, or with the rehearsal pairs drawn
         ``rehearsal_share`` of the time whatever their number, when there are both kinds."""
         rehearsed = self.rehearsed
-        if rehearsal_share is None or rehearsed is None or rehearsed.all() or not rehearsed.any():
+        if rehearsal_share is None or rehearsed.all() or not rehearsed.any():
             return torch.randint(len(self.pairs), (n,), generator=generator)
         counts = (rehearsed.sum(), (~rehearsed).sum())
         weights = torch.where(rehearsed, rehearsal_share / counts[0], (1.0 - rehearsal_share) / counts[1])
@@ -187,6 +186,7 @@ def exact_pairs(root: Path, resolution: int) -> PairSet:
         images=torch.from_numpy(images).permute(0, 3, 1, 2).contiguous(),
         lights=torch.from_numpy(lights),
         pairs=torch.from_numpy(pairs).long(),
+        rehearsed=torch.zeros(len(pairs), dtype=torch.bool),
     )
 
 

@@ -47,13 +47,12 @@ def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
     for s in sets:
         pairs.append(s.pairs + offset)
         offset += len(s.images)
-    rehearsed = [s.rehearsed if s.rehearsed is not None else torch.zeros(len(s.pairs), dtype=torch.bool) for s in sets]
     return (
         data.PairSet(
             images=torch.cat([s.images for s in sets]),
             lights=torch.cat([s.lights for s in sets]),
             pairs=torch.cat(pairs),
-            rehearsed=torch.cat(rehearsed),
+            rehearsed=torch.cat([s.rehearsed for s in sets]),
         ),
         reports,
     )
