@@ -14,9 +14,10 @@
 # the decoder): the paper's losses (with the de-lit consistency and monitor colour
 # terms) for 3000 steps, 6000 more from those weights (a second cosine schedule), then
 # 1500 more with the lighting-change loss (docs/training.md): models/starter-next. A fourth
-# stage fine-tunes that on the desk sessions alone (1500 steps at a third of the rate), the
-# sessions the element's users sit: models/starter, the element's default, keeps most of
-# the side it learnt under the dome and is more accurate at the desk.
+# stage fine-tunes that on the desk sessions (1500 steps at a third of the rate), the
+# sessions the element's users sit, with the dome sessions kept as rehearsal for a tenth of
+# each batch: models/starter, the element's default, is more accurate at the desk than
+# starter-next and keeps most of the side it learnt under the dome.
 # Every step is skipped when its output exists, so the script resumes where it stopped.
 # Personal models fine-tune from this one.
 set -euo pipefail
@@ -81,15 +82,19 @@ run=$run-long-change
 (cd train && "$py" -m lsyd.export --run "../$run" --data "../$data" --out ../models/starter-next --name starter-next)
 (cd train && "$py" -m lsyd.runs save-network --run "../$run" --out ../models/starter-next/network.pt)
 
-# The fourth stage: the desk sessions alone, from starter-next's weights.
-desk="$data-desk"
+# The fourth stage: the desk sessions, from starter-next's weights, with the dome sessions
+# drawn for a tenth of each batch (named as lsydrelight train names rehearsal sessions).
+desk="$data-rehearsal"
 mkdir -p "$desk/captures"
 for person in $train_people; do
   [ -e "$desk/captures/person-$person" ] || ln -s "../../$(basename "$data")/captures/person-$person" "$desk/captures/person-$person"
+  [ -e "$desk/captures/rehearsal-dome-$person" ] ||
+    ln -s "../../$(basename "$data")/captures/person-$person-dome" "$desk/captures/rehearsal-dome-$person"
 done
 [ -e "$desk/heldout" ] || ln -s "../$(basename "$data")/heldout" "$desk/heldout"
-desk_run="$run-desk"
-train_stage "$desk_run" "$desk" --steps 1500 --lr 6e-5 --init ../models/starter-next/network.pt "${losses[@]}" --change 1.0
+desk_run="$run-rehearsal"
+train_stage "$desk_run" "$desk" --steps 1500 --lr 6e-5 --init ../models/starter-next/network.pt "${losses[@]}" --change 1.0 \
+  --rehearsal-share 0.1
 (cd train && "$py" -m lsyd.export --run "../$desk_run" --data "../$desk" --out ../models/starter --name starter)
 (cd train && "$py" -m lsyd.runs save-network --run "../$desk_run" --out ../models/starter/network.pt)
 for stage in desk dome; do
