@@ -8,12 +8,20 @@
 //! ```text
 //! cargo run --release --example evaluate_element -- [--recording call] [--frames 90]
 //!     [--model models/default] [--record]
+//!     [--predicted] [--clean-face] [--set alpha=1 --set prediction-weight=1 ...]
 //! ```
+//!
+//! `--predicted` leaves the monitor stream out, so the element predicts the
+//! source light from the face (its default use); `--clean-face` feeds the
+//! recording's face without the camera's noise (rendered once into
+//! `target/clean-faces/`, as `examples/flicker.rs` renders it); `--set` gives the element
+//! other property values. Each makes figures that are not the model card's,
+//! so none goes with `--record`.
 
 use clap::Parser;
 use lsydrelight_testkit::{
     checkout, default_model,
-    recording::{ensure_recording, score_recording},
+    recording::{ensure_clean_face, ensure_recording, score_face},
 };
 use std::path::PathBuf;
 
@@ -32,6 +40,23 @@ struct Args {
     /// Write the figures into the model's manifest (`metrics.element`).
     #[arg(long)]
     record: bool,
+    /// Leave the monitor stream out: the element predicts the source light.
+    #[arg(long)]
+    predicted: bool,
+    /// Feed the recording's face without the camera's noise.
+    #[arg(long)]
+    clean_face: bool,
+    /// An element property, NAME=VALUE as gst-launch takes it; repeat for more.
+    #[arg(long = "set", value_parser = property)]
+    properties: Vec<(String, String)>,
+}
+
+/// NAME=VALUE, split at the first `=`.
+fn property(text: &str) -> Result<(String, String), String> {
+    let (name, value) = text
+        .split_once('=')
+        .ok_or_else(|| format!("--set {text}: give NAME=VALUE, such as alpha=1"))?;
+    Ok((name.to_string(), value.to_string()))
 }
 
 fn main() -> Result<(), String> {
@@ -40,22 +65,40 @@ fn main() -> Result<(), String> {
         frames,
         model,
         record,
+        predicted,
+        clean_face,
+        properties,
     } = Args::parse();
+    if record && (predicted || clean_face || !properties.is_empty()) {
+        return Err(
+            "--record keeps the model card's figures, made with the monitor stream, the \
+                    camera's noise and the element's defaults: leave out --predicted, \
+                    --clean-face and --set to record"
+                .into(),
+        );
+    }
     let model = model.unwrap_or_else(default_model);
 
     let dir = checkout().join(format!("target/recordings/{recording}-{frames}"));
     ensure_recording(&dir, &recording, frames)?;
+    let face = if clean_face {
+        let clean = checkout().join(format!("target/clean-faces/{recording}-{frames}.y4m"));
+        ensure_clean_face(&clean, &recording, frames)?;
+        clean
+    } else {
+        dir.join("face.y4m")
+    };
     let mut results = serde_json::Map::new();
     println!(
         "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | tOF face region | input tOF | ms/frame |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
+    let model_location = model.to_str().ok_or("model path is not UTF-8")?;
+    let props: Vec<(&str, &str)> = std::iter::once(("model-location", model_location))
+        .chain(properties.iter().map(|(k, v)| (k.as_str(), v.as_str())))
+        .collect();
     for target in ["studio", "sunset", "left-key"] {
-        let props = [(
-            "model-location",
-            model.to_str().ok_or("model path is not UTF-8")?,
-        )];
-        let s = score_recording(&dir, target, true, &props, true)?;
+        let s = score_face(&dir, &face, target, !predicted, &props, true)?;
         println!(
             "| {target} | {} | {:.3} | {:.3} | {:.3} | {:.3} | {:.4} | {:.4} | {:.1} |",
             s.frames,

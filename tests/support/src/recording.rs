@@ -334,6 +334,11 @@ pub fn score_face(
         crate::default_model().to_str().expect("UTF-8 path"),
     );
     for (k, v) in properties {
+        if r.find_property(k).is_none() {
+            return Err(format!(
+                "lsydrelight has no property {k} (gst-inspect-1.0 lsydrelight lists them)"
+            ));
+        }
         r.set_property_from_str(k, v);
     }
     score_pipeline(
