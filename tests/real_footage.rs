@@ -271,7 +271,8 @@ fn a_key_from_the_left_and_one_from_the_right_light_a_real_face_differently() {
     // under it than under `cool-key-right` (key swap -26.1,
     // `examples/target_lights direction`). The element draws the side with
     // that sign on real faces: -5.5 on the portrait and -10.5 on the film clip
-    // (median over 30 frames; -7.2 over this test's 12); the release before
+    // (median over 30 frames; the still portrait reads the same over this
+    // test's 8, the film clip -7.2 over its 12); the release before
     // 2026-12-06, whose starter was trained on lights within a monitor's
     // width only, drew -0.8 and -4.9, and the starter of dfd58a9, whose last
     // stage left the dome's side lights out, -4.5 on the portrait.

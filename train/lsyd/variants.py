@@ -147,7 +147,7 @@ def int8_card(model: Path, int8: Path) -> str:
         "static QDQ quantisation, per-channel 7-bit weights (so CPUs without VNNI do not saturate), activations",
         f"calibrated on {record['calibration']}. Everything else is `{model.name}`'s, fp32: the element",
         f"loads it as it loads `{model.name}` (`model-location`). Its network was measured faster on a CPU",
-        'with AVX-512 VNNI, at a small cost in error; the project README\'s "int8 with VNNI" has the',
+        'with AVX-512 VNNI, at a small cost in error; docs/benchmark.md\'s "int8 variants" has the',
         "timings.",
         "",
         f"Made by: `{record['command']}`",
