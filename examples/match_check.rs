@@ -28,7 +28,10 @@
 //! ```
 //!
 //! Writes `<out>/table.md` and `<out>/results.json`; `results/match_check/plot.py`
-//! draws the ROC curves from the JSON.
+//! draws the ROC curves from the JSON. Beside them, `<out>/prediction.md`: how
+//! closely the light predicted from each face follows its own screen (the
+//! correlation over the frames of the luminance and the colour the check
+//! compares); `--prediction-only` runs the genuine pairings alone for it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -39,7 +42,9 @@ use gst::prelude::*;
 use gst_video::prelude::*;
 use gstlsydrelight::frame::Frame;
 use gstlsydrelight::light::Light;
-use gstlsydrelight::monitor_match::{Component, Features, MatchSettings, MatchWindow, Verdict};
+use gstlsydrelight::monitor_match::{
+    Component, Features, MatchSettings, MatchWindow, Verdict, correlation,
+};
 use lsydrelight_testkit::{checkout, default_model, init, recording::ensure_recording};
 
 /// Window lengths measured, seconds.
@@ -319,6 +324,56 @@ struct Args {
         default_value = "cuts,slow,call,walkaway,steady"
     )]
     recordings: Vec<String>,
+    /// Only each face with its own screen: writes `<out>/prediction.md`
+    /// without the check's ROC.
+    #[arg(long)]
+    prediction_only: bool,
+}
+
+/// How closely the light predicted from each face follows its own screen: per
+/// recording, over its frames with a prediction, the correlation of the
+/// predicted and the screen's luminance and colour, and their means.
+fn prediction_table(trials: &[Trial], recordings: &[Recorded]) -> String {
+    let mut text = String::from(
+        "| recording | frames | luminance correlation | colour correlation | mean luminance, predicted / screen | mean colour, predicted / screen |\n|---|---|---|---|---|---|\n",
+    );
+    for trial in trials.iter().filter(|t| t.kind == Kind::Genuine) {
+        let recorded = &recordings[trial.face];
+        let pairs: Vec<(Features, Features)> = recorded
+            .screen
+            .iter()
+            .zip(&trial.pairing.predicted)
+            .filter_map(|(screen, predicted)| predicted.map(|p| (*screen, p)))
+            .collect();
+        let of = |feature: fn(&Features) -> f64| -> Vec<(f64, f64)> {
+            pairs
+                .iter()
+                .map(|(screen, predicted)| (feature(screen), feature(predicted)))
+                .collect()
+        };
+        // A screen that does not change has nothing to follow.
+        let corr = |values: &[(f64, f64)]| {
+            correlation(values, 1e-4).map_or("screen still".to_string(), |c| format!("{c:.2}"))
+        };
+        let means = |values: &[(f64, f64)]| {
+            let n = values.len().max(1) as f64;
+            let (s, p) = values
+                .iter()
+                .fold((0.0, 0.0), |(s, p), (a, b)| (s + a / n, p + b / n));
+            format!("{p:.3} / {s:.3}")
+        };
+        let (luminance, colour) = (of(|f| f.luminance), of(|f| f.colour));
+        text += &format!(
+            "| {} | {} | {} | {} | {} | {} |\n",
+            recorded.name,
+            pairs.len(),
+            corr(&luminance),
+            corr(&colour),
+            means(&luminance),
+            means(&colour),
+        );
+    }
+    text
 }
 
 fn main() -> Result<(), String> {
@@ -352,12 +407,14 @@ fn main() -> Result<(), String> {
     let mut trials = Vec::new();
     for face in 0..recordings.len() {
         let mut pairings = vec![(Kind::Genuine, face, 0.0)];
-        pairings.extend(DELAYS.map(|d| (Kind::Delayed, face, d)));
-        pairings.extend(
-            (0..recordings.len())
-                .filter(|s| *s != face)
-                .map(|s| (Kind::Swapped, s, 0.0)),
-        );
+        if !args.prediction_only {
+            pairings.extend(DELAYS.map(|d| (Kind::Delayed, face, d)));
+            pairings.extend(
+                (0..recordings.len())
+                    .filter(|s| *s != face)
+                    .map(|s| (Kind::Swapped, s, 0.0)),
+            );
+        }
         for (kind, screen, delay) in pairings {
             let started = std::time::Instant::now();
             let (f, s) = (&recordings[face], &recordings[screen]);
@@ -378,6 +435,19 @@ fn main() -> Result<(), String> {
                 pairing,
             });
         }
+    }
+    let names_list = names.join(",");
+    let prediction = format!(
+        "# The light predicted from the face against its own screen\n\nRecordings {names_list} ({frames} frames each), model `{}`, its light decoder's prediction read from `monitor_src` while the face's own monitor stream plays: luminance and colour (blue less red over the sum) as the monitor-match check compares them, on linear light.\n\n{}\nMade by `cargo run --release --example match_check -- --frames {frames} --recordings {names_list} --model {} --prediction-only`.\n",
+        model.display(),
+        prediction_table(&trials, &recordings),
+        model.display(),
+    );
+    print!("{prediction}");
+    std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
+    std::fs::write(out.join("prediction.md"), &prediction).map_err(|e| e.to_string())?;
+    if args.prediction_only {
+        return Ok(());
     }
     let element_scores = |kind: Kind| -> Vec<f64> {
         trials
