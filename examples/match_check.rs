@@ -541,7 +541,8 @@ fn main() -> Result<(), String> {
     }
     let names = names.join(",");
     let command = format!(
-        "cargo run --release --example match_check -- --frames {frames} --recordings {names}"
+        "cargo run --release --example match_check -- --frames {frames} --recordings {names} --model {}",
+        model.display()
     );
     let text = format!(
         "# Monitor-match check on the simulator\n\nRecordings {names} ({frames} frames each); windows every {STEP} s; delays {DELAYS:?} s; threshold {}.\n\n{table}\nThe element's own messages ({ELEMENT_WINDOW} s window, one a second, full windows only): AUC {element_auc:.3} over {} genuine and {} impostor messages.\n\nMade by `{command}`.\n",
