@@ -89,6 +89,26 @@ fn main() -> Result<(), String> {
         dir.join("face.y4m")
     };
     let mut results = serde_json::Map::new();
+    let set: Vec<String> = properties.iter().map(|(k, v)| format!("{k}={v}")).collect();
+    println!(
+        "{recording}, model {}: source light {}, face {}, properties {}\n",
+        model.display(),
+        if predicted {
+            "predicted"
+        } else {
+            "from the monitor stream"
+        },
+        if clean_face {
+            "without the camera's noise"
+        } else {
+            "as filmed"
+        },
+        if set.is_empty() {
+            "the defaults".to_string()
+        } else {
+            set.join(" ")
+        },
+    );
     println!(
         "| target | frames | RMSE face region | RMSE frame | input RMSE region | change RMSE | tOF face region | input tOF | ms/frame |"
     );

@@ -25,13 +25,15 @@
 //! ```text
 //! cargo run --release --example match_check -- [--frames 300] [--dir target/recordings]
 //!     [--recordings cuts,slow,call,walkaway,steady] [--out results/match_check] [--model DIR]
+//!     [--prediction-only]
 //! ```
 //!
 //! Writes `<out>/table.md` and `<out>/results.json`; `results/match_check/plot.py`
 //! draws the ROC curves from the JSON. Beside them, `<out>/prediction.md`: how
 //! closely the light predicted from each face follows its own screen (the
-//! correlation over the frames of the luminance and the colour the check
-//! compares); `--prediction-only` runs the genuine pairings alone for it.
+//! correlation over the frames of the screen's luminance, linear, and of its
+//! colour, the features the check reads); `--prediction-only` runs the genuine
+//! pairings alone for it.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -351,12 +353,16 @@ fn prediction_table(trials: &[Trial], recordings: &[Recorded]) -> String {
                 .map(|(screen, predicted)| (feature(screen), feature(predicted)))
                 .collect()
         };
-        // A screen that does not change has nothing to follow.
+        // A screen (or a prediction) that does not change has nothing to
+        // correlate (`steady`'s screen holds still).
         let corr = |values: &[(f64, f64)]| {
-            correlation(values, 1e-4).map_or("screen still".to_string(), |c| format!("{c:.2}"))
+            correlation(values, 1e-4).map_or("does not vary".to_string(), |c| format!("{c:.2}"))
         };
         let means = |values: &[(f64, f64)]| {
-            let n = values.len().max(1) as f64;
+            if values.is_empty() {
+                return "no frames".to_string();
+            }
+            let n = values.len() as f64;
             let (s, p) = values
                 .iter()
                 .fold((0.0, 0.0), |(s, p), (a, b)| (s + a / n, p + b / n));
@@ -436,15 +442,18 @@ fn main() -> Result<(), String> {
             });
         }
     }
-    let names_list = names.join(",");
+    let names = names.join(",");
+    let command = format!(
+        "cargo run --release --example match_check -- --frames {frames} --recordings {names} --model {}",
+        model.display()
+    );
+    std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     let prediction = format!(
-        "# The light predicted from the face against its own screen\n\nRecordings {names_list} ({frames} frames each), model `{}`, its light decoder's prediction read from `monitor_src` while the face's own monitor stream plays: luminance and colour (blue less red over the sum) as the monitor-match check compares them, on linear light.\n\n{}\nMade by `cargo run --release --example match_check -- --frames {frames} --recordings {names_list} --model {} --prediction-only`.\n",
+        "# The light predicted from the face against its own screen\n\nRecordings {names} ({frames} frames each), model `{}`, its light decoder's prediction read from `monitor_src` while the face's own monitor stream plays: luminance (linear; the monitor-match check correlates its logarithm) and colour (blue less red over the sum), the features the check reads.\n\n{}\nMade by `{command} --prediction-only`.\n",
         model.display(),
         prediction_table(&trials, &recordings),
-        model.display(),
     );
     print!("{prediction}");
-    std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     std::fs::write(out.join("prediction.md"), &prediction).map_err(|e| e.to_string())?;
     if args.prediction_only {
         return Ok(());
@@ -539,11 +548,6 @@ fn main() -> Result<(), String> {
             }),
         );
     }
-    let names = names.join(",");
-    let command = format!(
-        "cargo run --release --example match_check -- --frames {frames} --recordings {names} --model {}",
-        model.display()
-    );
     let text = format!(
         "# Monitor-match check on the simulator\n\nRecordings {names} ({frames} frames each); windows every {STEP} s; delays {DELAYS:?} s; threshold {}.\n\n{table}\nThe element's own messages ({ELEMENT_WINDOW} s window, one a second, full windows only): AUC {element_auc:.3} over {} genuine and {} impostor messages.\n\nMade by `{command}`.\n",
         settings.threshold,
@@ -551,7 +555,6 @@ fn main() -> Result<(), String> {
         element_impostor.len(),
     );
     print!("{text}");
-    std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;
     std::fs::write(out.join("table.md"), text).map_err(|e| e.to_string())?;
     let json = serde_json::json!({
         "command": command,

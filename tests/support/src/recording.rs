@@ -16,6 +16,7 @@ use std::time::Instant;
 
 use deskstage::io::{Chroma, Y4mReader, ycbcr_planes_to_rgb};
 use deskstage::monitor::RgbImage;
+use gst::glib;
 use gst::prelude::*;
 use gst_video::prelude::*;
 
@@ -279,7 +280,8 @@ fn launch(description: &str) -> Result<gst::Pipeline, String> {
 /// Relights `<dir>/face.y4m` (with `<dir>/monitor.y4m` unless `with_monitor` is false)
 /// to the target `<dir>/target-<target>.png` and scores it against `<dir>/truth-<target>.y4m`.
 /// The element relights with the person's own model (`models/default`); `properties`
-/// are set on it from strings, as gst-launch does; `with_flow` adds the flow-based tOF.
+/// are set on it from strings, as gst-launch does (a name or value it refuses is an
+/// error); `with_flow` adds the flow-based tOF.
 pub fn score_recording(
     dir: &Path,
     target: &str,
@@ -334,12 +336,7 @@ pub fn score_face(
         crate::default_model().to_str().expect("UTF-8 path"),
     );
     for (k, v) in properties {
-        if r.find_property(k).is_none() {
-            return Err(format!(
-                "lsydrelight has no property {k} (gst-inspect-1.0 lsydrelight lists them)"
-            ));
-        }
-        r.set_property_from_str(k, v);
+        set_from_str(&r, k, v)?;
     }
     score_pipeline(
         &pipeline,
@@ -348,6 +345,48 @@ pub fn score_face(
         Some(&r),
         with_flow,
     )
+}
+
+/// Sets the element's property `name` from `value` as gst-launch would, or says
+/// what is wrong (glib's own setter panics on a value the property refuses).
+fn set_from_str(element: &gst::Element, name: &str, value: &str) -> Result<(), String> {
+    let pspec = element.find_property(name).ok_or_else(|| {
+        format!("lsydrelight has no property {name} (gst-inspect-1.0 lsydrelight lists them)")
+    })?;
+    if !pspec.flags().contains(glib::ParamFlags::WRITABLE) {
+        return Err(format!(
+            "lsydrelight's {name} cannot be set: it is read-only"
+        ));
+    }
+    let parsed = glib::Value::deserialize_with_pspec(value, &pspec)
+        .ok()
+        .filter(|parsed| within_range(&pspec, parsed))
+        .ok_or_else(|| {
+            format!("lsydrelight's {name} does not take {value} (gst-inspect-1.0 lsydrelight gives its type and range)")
+        })?;
+    element.set_property_from_value(name, &parsed);
+    Ok(())
+}
+
+/// Whether a numeric property's `value` lies within its declared range (other
+/// kinds of value were checked when they were parsed).
+fn within_range(pspec: &glib::ParamSpec, value: &glib::Value) -> bool {
+    macro_rules! range_of {
+        ($spec:ty, $number:ty) => {
+            if let Some(spec) = pspec.downcast_ref::<$spec>() {
+                return value
+                    .get::<$number>()
+                    .is_ok_and(|v| (spec.minimum()..=spec.maximum()).contains(&v));
+            }
+        };
+    }
+    range_of!(glib::ParamSpecDouble, f64);
+    range_of!(glib::ParamSpecFloat, f32);
+    range_of!(glib::ParamSpecInt, i32);
+    range_of!(glib::ParamSpecUInt, u32);
+    range_of!(glib::ParamSpecInt64, i64);
+    range_of!(glib::ParamSpecUInt64, u64);
+    true
 }
 
 /// Scores the face video `face` as it is, through the same pipeline and decoding
