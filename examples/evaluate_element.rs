@@ -21,7 +21,7 @@
 use clap::Parser;
 use lsydrelight_testkit::{
     checkout, default_model,
-    recording::{ensure_clean_face, ensure_recording, score_face},
+    recording::{ensure_clean_face, ensure_recording, property_setting, score_face},
 };
 use std::path::PathBuf;
 
@@ -47,16 +47,8 @@ struct Args {
     #[arg(long)]
     clean_face: bool,
     /// An element property, NAME=VALUE as gst-launch takes it; repeat for more.
-    #[arg(long = "set", value_parser = property)]
+    #[arg(long = "set", value_parser = property_setting)]
     properties: Vec<(String, String)>,
-}
-
-/// NAME=VALUE, split at the first `=`.
-fn property(text: &str) -> Result<(String, String), String> {
-    let (name, value) = text
-        .split_once('=')
-        .ok_or_else(|| format!("--set {text}: give NAME=VALUE, such as alpha=1"))?;
-    Ok((name.to_string(), value.to_string()))
 }
 
 fn main() -> Result<(), String> {

@@ -23,7 +23,7 @@
 use clap::Parser;
 use lsydrelight_testkit::{
     checkout,
-    recording::{Score, ensure_clean_face, ensure_recording, score_face},
+    recording::{Score, ensure_clean_face, ensure_recording, property_setting, score_face},
 };
 
 /// Milliseconds a frame the element spent denoising and pasting the change
@@ -60,15 +60,8 @@ struct Args {
     #[arg(long)]
     flow: bool,
     /// An element property, as property=value; repeatable, set in order.
-    #[arg(long = "set", value_name = "PROPERTY=VALUE", value_parser = property_value)]
+    #[arg(long = "set", value_name = "PROPERTY=VALUE", value_parser = property_setting)]
     sets: Vec<(String, String)>,
-}
-
-/// `property=value`, split.
-fn property_value(text: &str) -> Result<(String, String), String> {
-    text.split_once('=')
-        .map(|(k, v)| (k.to_string(), v.to_string()))
-        .ok_or_else(|| format!("{text}: expected property=value"))
 }
 
 fn main() -> Result<(), String> {

@@ -347,6 +347,14 @@ pub fn score_face(
     )
 }
 
+/// An element property setting given on a command line as NAME=VALUE (`--set`),
+/// split at the first `=`.
+pub fn property_setting(text: &str) -> Result<(String, String), String> {
+    text.split_once('=')
+        .map(|(name, value)| (name.to_string(), value.to_string()))
+        .ok_or_else(|| format!("--set {text}: give NAME=VALUE, such as alpha=1"))
+}
+
 /// Sets the element's property `name` from `value` as gst-launch would, or says
 /// what is wrong (glib's own setter panics on a value the property refuses).
 fn set_from_str(element: &gst::Element, name: &str, value: &str) -> Result<(), String> {
