@@ -21,7 +21,7 @@
 use clap::Parser;
 use lsydrelight_testkit::{
     checkout, default_model,
-    recording::{ensure_clean_face, ensure_recording, property_setting, score_face},
+    recording::{clean_face_of, ensure_recording, property_setting, score_face},
 };
 use std::path::PathBuf;
 
@@ -74,9 +74,7 @@ fn main() -> Result<(), String> {
     let dir = checkout().join(format!("target/recordings/{recording}-{frames}"));
     ensure_recording(&dir, &recording, frames)?;
     let face = if clean_face {
-        let clean = checkout().join(format!("target/clean-faces/{recording}-{frames}.y4m"));
-        ensure_clean_face(&clean, &recording, frames)?;
-        clean
+        clean_face_of(&recording, frames)?
     } else {
         dir.join("face.y4m")
     };

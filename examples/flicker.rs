@@ -23,7 +23,7 @@
 use clap::Parser;
 use lsydrelight_testkit::{
     checkout,
-    recording::{Score, ensure_clean_face, ensure_recording, property_setting, score_face},
+    recording::{Score, clean_face_of, ensure_recording, property_setting, score_face},
 };
 
 /// Milliseconds a frame the element spent denoising and pasting the change
@@ -91,9 +91,7 @@ fn main() -> Result<(), String> {
         ensure_recording(&dir, name, frames)?;
         let mut faces = vec![("noisy", dir.join("face.y4m"))];
         if clean {
-            let path = checkout().join(format!("target/clean-faces/{name}-{frames}.y4m"));
-            ensure_clean_face(&path, name, frames)?;
-            faces.push(("clean", path));
+            faces.push(("clean", clean_face_of(name, frames)?));
         }
         for target in &targets {
             for (kind, face) in &faces {

@@ -560,6 +560,14 @@ pub fn ensure_recording(dir: &Path, name: &str, frames: usize) -> Result<(), Str
     rec.write(dir).map_err(|e| e.to_string())
 }
 
+/// The noiseless face of the standard recording `name`'s first `frames` frames,
+/// rendered once into `target/clean-faces/`.
+pub fn clean_face_of(name: &str, frames: usize) -> Result<std::path::PathBuf, String> {
+    let path = crate::checkout().join(format!("target/clean-faces/{name}-{frames}.y4m"));
+    ensure_clean_face(&path, name, frames)?;
+    Ok(path)
+}
+
 /// Writes `path`, the first `frames` frames of the standard recording `name`
 /// as the webcam would have filmed them without sensor noise (4:2:0, as
 /// `face.y4m`); skipped when present. Rendered apart from the recording (only
