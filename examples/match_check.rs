@@ -25,7 +25,7 @@
 //! ```text
 //! cargo run --release --example match_check -- [--frames 300] [--dir target/recordings]
 //!     [--recordings cuts,slow,call,walkaway,steady] [--out results/match_check] [--model DIR]
-//!     [--prediction-only]
+//!     [--prediction-only] [--set colour-tracking=false ...]
 //! ```
 //!
 //! Writes `<out>/table.md` and `<out>/results.json`; `results/match_check/plot.py`
@@ -47,7 +47,10 @@ use gstlsydrelight::light::Light;
 use gstlsydrelight::monitor_match::{
     Component, Features, MatchSettings, MatchWindow, Verdict, correlation,
 };
-use lsydrelight_testkit::{checkout, default_model, init, recording::ensure_recording};
+use lsydrelight_testkit::{
+    checkout, default_model, init,
+    recording::{ensure_recording, property_setting, set_properties},
+};
 
 /// Window lengths measured, seconds.
 const WINDOWS: [f64; 4] = [1.0, 2.0, 3.0, 5.0];
@@ -102,6 +105,7 @@ fn run_pairing(
     monitor_dir: &Path,
     delay: f64,
     model: &Path,
+    properties: &[(String, String)],
     frames: usize,
     fps: f64,
 ) -> Result<Pairing, String> {
@@ -138,6 +142,7 @@ fn run_pairing(
     r.set_property("monitor-offset", (delay * 1e9).round() as i64);
     r.set_property("match-check", true);
     r.set_property("match-window", ELEMENT_WINDOW);
+    set_properties(&r, properties)?;
     let sink = pipeline
         .by_name("predicted")
         .ok_or("no appsink")?
@@ -330,6 +335,10 @@ struct Args {
     /// without the check's ROC.
     #[arg(long)]
     prediction_only: bool,
+    /// An element property for every pairing, as gst-launch takes it
+    /// (`--set colour-tracking=false`); repeat for more.
+    #[arg(long = "set", value_parser = property_setting)]
+    set: Vec<(String, String)>,
 }
 
 /// How closely the light predicted from each face follows its own screen: per
@@ -424,7 +433,7 @@ fn main() -> Result<(), String> {
         for (kind, screen, delay) in pairings {
             let started = std::time::Instant::now();
             let (f, s) = (&recordings[face], &recordings[screen]);
-            let pairing = run_pairing(&f.dir, &s.dir, delay, &model, frames, f.fps)?;
+            let pairing = run_pairing(&f.dir, &s.dir, delay, &model, &args.set, frames, f.fps)?;
             eprintln!(
                 "face {} with screen {} {delay} s late: {} of {frames} frames with a prediction, {} element messages over a full window ({:.1} s)",
                 f.name,
@@ -443,8 +452,13 @@ fn main() -> Result<(), String> {
         }
     }
     let names = names.join(",");
+    let set: String = args
+        .set
+        .iter()
+        .map(|(k, v)| format!(" --set {k}={v}"))
+        .collect();
     let command = format!(
-        "cargo run --release --example match_check -- --frames {frames} --recordings {names} --model {}",
+        "cargo run --release --example match_check -- --frames {frames} --recordings {names} --model {}{set}",
         model.display()
     );
     std::fs::create_dir_all(&out).map_err(|e| e.to_string())?;

@@ -13,7 +13,7 @@ use clap::Parser;
 use deskstage::content::{Clip, Playlist};
 use deskstage::dataset::Recording;
 use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
-use gstlsydrelight::frame::Frame;
+use gstlsydrelight::frame::{FacePlace, Frame};
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{default_model, person::network_input};
@@ -75,7 +75,12 @@ fn main() -> Result<(), String> {
         let mut out = Vec::new();
         for _ in 0..60 {
             out = r
-                .relight(&inputs[0].0, Source::Known(probe_light.clone()), false)
+                .relight(
+                    &inputs[0].0,
+                    FacePlace::default(),
+                    Source::Known(probe_light.clone()),
+                    false,
+                )
                 .map_err(|e| e.to_string())?
                 .relit
                 .ok_or("NaN in the probe")?;
@@ -100,7 +105,7 @@ fn main() -> Result<(), String> {
                 Source::Known(light.clone())
             };
             let out = r
-                .relight(img, source, i % 25 == 0)
+                .relight(img, FacePlace::default(), source, i % 25 == 0)
                 .map_err(|e| e.to_string())?;
             match out.relit {
                 Some(v) => out_of_range += v.iter().filter(|x| !(0.0..=1.0).contains(*x)).count(),

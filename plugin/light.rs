@@ -27,7 +27,8 @@ const SPLIT_FROM: usize = 65_536;
 /// Resolution of the table that decodes sRGB values that are not whole bytes (from YUV).
 const DECODE_STEPS: usize = 4096;
 
-fn srgb_to_linear(v: f32) -> f32 {
+/// The sRGB transfer function inverted: an sRGB value in [0, 1] as linear light.
+pub fn srgb_to_linear(v: f32) -> f32 {
     if v <= 0.04045 {
         v / 12.92
     } else {

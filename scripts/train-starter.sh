@@ -9,8 +9,9 @@
 # lights from up to 90 degrees to each side; docs/simulator.md), which teaches which side
 # a light comes from. Pairs are found by facial keypoints within each session, as on real
 # captures. People 200-207 are never trained on: their held-out sets (9 poses x 9 lights,
-# on the desk and under the dome) measure the model on strangers. Training has three
-# stages, all with the light field (a map of where the target light falls, drawn into
+# on the desk and under the dome) measure the model on strangers, and a desk session each
+# the colour tracking of its predicted light (lsyd.evaluation.colour_tracking). Training has
+# three stages, all with the light field (a map of where the target light falls, drawn into
 # the decoder): the paper's losses (with the de-lit consistency and monitor colour
 # terms) for 3000 steps, 6000 more from those weights (a second cosine schedule), then
 # 1500 more with the lighting-change loss (docs/training.md): models/starter-next. A fourth
@@ -51,6 +52,15 @@ for person in $unseen_people; do
   [ -f "$data/unseen/person-$person/clean.npy" ] || "$stage" heldout --subject "$person" --out "$data/unseen/person-$person"
   [ -f "$data/unseen-dome/person-$person/clean.npy" ] ||
     "$stage" heldout --subject "$person" --stage dome --out "$data/unseen-dome/person-$person"
+  # A desk session of each unseen person, never trained on: the colour tracking's test
+  # (lsyd.evaluation.colour_tracking) needs frames in time order.
+  session="$data/unseen-captures/person-$person"
+  if [ ! -f "$session/face.npy" ]; then
+    rm -rf "$data/tmp"
+    "$stage" captures --subject "$person" --seed "$((person + 5000))" --sessions 1 --seconds "$seconds" --out "$data/tmp"
+    mkdir -p "$data/unseen-captures"
+    mv "$data/tmp/session-000" "$session"
+  fi
 done
 
 losses=(--delit-consistency 0.1 --monitor-colour 1.0)
@@ -100,3 +110,4 @@ train_stage "$desk_run" "$desk" --steps 1500 --lr 6e-5 --init ../models/starter-
 for stage in desk dome; do
   (cd train && "$py" -m lsyd.evaluation.starter --data "../$data" --models ../models/starter ../models/starter-next --stage "$stage")
 done
+(cd train && "$py" -m lsyd.evaluation.colour_tracking --data "../$data" --model ../models/starter)

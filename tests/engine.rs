@@ -7,6 +7,7 @@ use std::path::Path;
 use gstlsydrelight::engine::{
     self, ContractError, EngineError, FramePolicy, Provider, Relighter, Skips, Source, Temporal,
 };
+use gstlsydrelight::frame::FacePlace;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{
@@ -49,7 +50,7 @@ fn source_light_is_the_papers_weighted_average() {
     let mut used = Vec::new();
     for l in &lights {
         used.push(
-            r.relight(&img, Source::Known(l.clone()), false)
+            r.relight(&img, FacePlace::default(), Source::Known(l.clone()), false)
                 .unwrap()
                 .source,
         );
@@ -83,15 +84,39 @@ fn features_are_smoothed_exponentially() {
     });
     let a = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let b = image(&r, deskstage::math::Vec3::new(0.3, 0.3, 0.6));
-    r.relight(&a, Source::Known(light.clone()), false).unwrap();
+    r.relight(
+        &a,
+        FacePlace::default(),
+        Source::Known(light.clone()),
+        false,
+    )
+    .unwrap();
     let fa = r.smoothed_features().unwrap().to_vec();
     r.reset();
-    r.relight(&b, Source::Known(light.clone()), false).unwrap();
+    r.relight(
+        &b,
+        FacePlace::default(),
+        Source::Known(light.clone()),
+        false,
+    )
+    .unwrap();
     let fb = r.smoothed_features().unwrap().to_vec();
     r.reset();
     // f_t = α f_t + (1 − α) f_{t−1}: frame b after frame a.
-    r.relight(&a, Source::Known(light.clone()), false).unwrap();
-    r.relight(&b, Source::Known(light.clone()), false).unwrap();
+    r.relight(
+        &a,
+        FacePlace::default(),
+        Source::Known(light.clone()),
+        false,
+    )
+    .unwrap();
+    r.relight(
+        &b,
+        FacePlace::default(),
+        Source::Known(light.clone()),
+        false,
+    )
+    .unwrap();
     let fab = r.smoothed_features().unwrap();
     for (level, ((x, y), z)) in fa.iter().zip(&fb).zip(fab).enumerate() {
         let want: Vec<f32> = x
@@ -114,7 +139,12 @@ fn constant_input_converges_to_the_single_frame_result() {
     let mut fresh = relighter(Temporal::default());
     let img = image(&fresh, deskstage::math::Vec3::new(0.6, 0.6, 0.6));
     let single = fresh
-        .relight(&img, Source::Known(light.clone()), false)
+        .relight(
+            &img,
+            FacePlace::default(),
+            Source::Known(light.clone()),
+            false,
+        )
         .unwrap()
         .relit
         .unwrap();
@@ -122,6 +152,7 @@ fn constant_input_converges_to_the_single_frame_result() {
     let other = image(&r, deskstage::math::Vec3::new(0.1, 0.1, 0.9));
     r.relight(
         &other,
+        FacePlace::default(),
         Source::Known(Light::uniform([0.1, 0.1, 0.9])),
         false,
     )
@@ -129,7 +160,12 @@ fn constant_input_converges_to_the_single_frame_result() {
     let mut last = Vec::new();
     for _ in 0..40 {
         last = r
-            .relight(&img, Source::Known(light.clone()), false)
+            .relight(
+                &img,
+                FacePlace::default(),
+                Source::Known(light.clone()),
+                false,
+            )
             .unwrap()
             .relit
             .unwrap();
@@ -150,7 +186,9 @@ fn unknown_source_uses_the_predicted_light() {
         ..Temporal::default()
     });
     let img = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
-    let out = r.relight(&img, Source::Unknown, false).unwrap();
+    let out = r
+        .relight(&img, FacePlace::default(), Source::Unknown, false)
+        .unwrap();
     let predicted = out.predicted.expect("unknown source predicts");
     assert_eq!(
         out.source, predicted,
@@ -160,7 +198,9 @@ fn unknown_source_uses_the_predicted_light() {
     assert_eq!(r.counts().predictions, 1);
     // The next frame's prediction is smoothed with this one.
     let blue = image(&r, deskstage::math::Vec3::new(0.2, 0.2, 1.0));
-    let next = r.relight(&blue, Source::Unknown, false).unwrap();
+    let next = r
+        .relight(&blue, FacePlace::default(), Source::Unknown, false)
+        .unwrap();
     let raw = next.predicted.expect("unknown source predicts");
     let w = Temporal::default().prediction_weight;
     let expected: Vec<f32> = predicted
@@ -175,11 +215,62 @@ fn unknown_source_uses_the_predicted_light() {
         "the two frames' predictions differ"
     );
     let known = r
-        .relight(&img, Source::Known(Light::uniform([1.0; 3])), false)
+        .relight(
+            &img,
+            FacePlace::default(),
+            Source::Known(Light::uniform([1.0; 3])),
+            false,
+        )
         .unwrap();
     assert!(
         known.predicted.is_none(),
         "a known source skips light prediction"
+    );
+}
+
+/// Blue less red over the sum of a light's channel means, as the monitor-match
+/// check reads a light's colour.
+fn blueness(light: &Light) -> f32 {
+    let n = light.0.len() / 3;
+    let [r, g, b] = std::array::from_fn(|c| light.0[c * n..(c + 1) * n].iter().sum::<f32>());
+    (b - r) / (r + g + b)
+}
+
+#[test]
+fn the_predicted_light_turns_the_colour_the_face_turns() {
+    // The light decoder alone hardly reads a screen's colour from a face it was not
+    // trained on; following the face's own colour change, the prediction turns blue
+    // under a blue screen and warm under a warm one.
+    let predicted_under = |tracking: bool| {
+        let mut r = relighter(Temporal {
+            colour_tracking: tracking,
+            ..Temporal::default()
+        });
+        let mut predict = |screen: deskstage::math::Vec3| {
+            let img = image(&r, screen);
+            let out = r
+                .relight(&img, FacePlace::default(), Source::Unknown, false)
+                .unwrap();
+            blueness(&out.predicted.expect("unknown source predicts"))
+        };
+        for _ in 0..5 {
+            predict(deskstage::math::Vec3::new(0.8, 0.8, 0.8));
+        }
+        let blue = predict(deskstage::math::Vec3::new(0.3, 0.4, 1.0));
+        let warm = predict(deskstage::math::Vec3::new(1.0, 0.5, 0.2));
+        (blue, warm)
+    };
+    let (blue, warm) = predicted_under(true);
+    let (decoder_blue, decoder_warm) = predicted_under(false);
+    println!(
+        "blueness, blue then warm screen: tracked {blue:.3}, {warm:.3}; decoder alone {decoder_blue:.3}, {decoder_warm:.3}"
+    );
+    // The screens themselves: 0.41 and -0.47.
+    let screens =
+        blueness(&Light::uniform([0.3, 0.4, 1.0])) - blueness(&Light::uniform([1.0, 0.5, 0.2]));
+    assert!(
+        blue > 0.1 && warm < -0.1 && blue - warm > 0.5 * screens,
+        "tracked: {blue:.3} under blue, {warm:.3} under warm (the screens differ by {screens:.3})"
     );
 }
 

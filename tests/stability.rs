@@ -4,6 +4,7 @@
 
 use deskstage::math::Vec3;
 use gstlsydrelight::engine::{self, FramePolicy, Provider, Relighter, Skips, Source, Temporal};
+use gstlsydrelight::frame::FacePlace;
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{
@@ -69,7 +70,12 @@ fn long_runs_stay_finite_flat_and_without_drift() {
         let mut out = Vec::new();
         for _ in 0..60 {
             out = r
-                .relight(&faces[0], Source::Known(lights[0].clone()), false)
+                .relight(
+                    &faces[0],
+                    FacePlace::default(),
+                    Source::Known(lights[0].clone()),
+                    false,
+                )
                 .unwrap()
                 .relit
                 .unwrap();
@@ -84,6 +90,7 @@ fn long_runs_stay_finite_flat_and_without_drift() {
             let out = r
                 .relight(
                     &faces[k],
+                    FacePlace::default(),
                     Source::Known(lights[(i / 3) % 3].clone()),
                     i % 50 == 0,
                 )
@@ -138,7 +145,7 @@ fn extreme_faces_and_flat_regions_stay_finite() {
             Source::Unknown,
         ] {
             r.reset();
-            let out = r.relight(img, source, true).unwrap();
+            let out = r.relight(img, FacePlace::default(), source, true).unwrap();
             assert_sane(out.relit.as_ref().expect("finite output"), name);
             assert!(out.predicted.unwrap().is_finite());
         }
@@ -159,7 +166,7 @@ fn strobing_monitor_stays_bounded() {
             white.clone()
         };
         let out = r
-            .relight(&face, Source::Known(light), false)
+            .relight(&face, FacePlace::default(), Source::Known(light), false)
             .unwrap()
             .relit
             .unwrap();
@@ -189,14 +196,19 @@ fn target_equal_to_source_changes_little() {
     let face = network_input(&render_face(Vec3::new(0.8, 0.8, 0.8)), res);
     r.set_target(&light).unwrap();
     let same = r
-        .relight(&face, Source::Known(light.clone()), false)
+        .relight(
+            &face,
+            FacePlace::default(),
+            Source::Known(light.clone()),
+            false,
+        )
         .unwrap()
         .relit
         .unwrap();
     r.reset();
     r.set_target(&Light::uniform([0.1, 0.1, 0.6])).unwrap();
     let other = r
-        .relight(&face, Source::Known(light), false)
+        .relight(&face, FacePlace::default(), Source::Known(light), false)
         .unwrap()
         .relit
         .unwrap();
@@ -224,6 +236,7 @@ fn identical_input_gives_identical_output() {
             .map(|i| {
                 r.relight(
                     &faces[i % 2],
+                    FacePlace::default(),
                     Source::Known(Light::uniform([0.1 * i as f32; 3])),
                     true,
                 )

@@ -2,6 +2,7 @@
 //! Runtime, the network's stage chain, the paper's temporal filters and the
 //! per-frame policy that decides what each frame of a stream gets.
 
+pub mod colour_tracking;
 pub mod contract;
 pub mod policy;
 pub mod relighter;

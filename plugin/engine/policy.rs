@@ -23,6 +23,7 @@ use std::time::Instant;
 
 use crate::parallel::beside_long;
 
+use super::colour_tracking::{self, ColourTracker, face_colour};
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
@@ -267,6 +268,7 @@ pub struct FramePolicy {
     averager: SourceLightAverager,
     smoother: FeatureSmoother,
     predictions: PredictionSmoother,
+    colours: ColourTracker,
     /// The target light and its code, computed once per target.
     target: Option<(Light, Vec<f32>)>,
     /// The source light of the last frame that ran the network, before averaging.
@@ -293,6 +295,7 @@ impl FramePolicy {
             averager: SourceLightAverager::new(temporal.beta, temporal.average_frames),
             smoother: FeatureSmoother::new(temporal.alpha),
             predictions: PredictionSmoother::new(temporal.prediction_weight),
+            colours: ColourTracker::new(colour_tracking::SLOW_MEAN_WEIGHT),
             target: None,
             last_source: None,
             source_code: None,
@@ -321,6 +324,7 @@ impl FramePolicy {
         self.averager.reset();
         self.smoother.reset();
         self.predictions.reset();
+        self.colours.reset();
         self.last_source = None;
         self.last = None;
         if had_state {
@@ -336,6 +340,7 @@ impl FramePolicy {
             self.averager = SourceLightAverager::new(temporal.beta, temporal.average_frames);
             self.smoother = FeatureSmoother::new(temporal.alpha);
             self.predictions = PredictionSmoother::new(temporal.prediction_weight);
+            self.colours.reset();
             self.last = None;
         }
     }
@@ -557,7 +562,7 @@ impl FramePolicy {
             so_far,
         } = pending;
         let res = self.relighter.resolution();
-        let out = self.relight(&image, source, want_prediction)?;
+        let out = self.relight(&image, face, source, want_prediction)?;
         let Some(relit) = out.relit else {
             return Ok(Outcome {
                 action: Action::PassedThrough(PassThrough::NonFinite),
@@ -585,12 +590,14 @@ impl FramePolicy {
         })
     }
 
-    /// Runs the network on one image (planar sRGB in [0, 1], 3 × R × R) with the
-    /// stream's temporal filters. The light decoder runs when the source is unknown
-    /// or `want_prediction`. A NaN or Inf anywhere resets the temporal state.
+    /// Runs the network on one image (planar sRGB in [0, 1], 3 × R × R, the face
+    /// at `face`) with the stream's temporal filters. The light decoder runs when the
+    /// source is unknown or `want_prediction`. A NaN or Inf anywhere resets the
+    /// temporal state.
     pub fn relight(
         &mut self,
         image: &[f32],
+        face: FacePlace,
         source: Source,
         want_prediction: bool,
     ) -> Result<FrameOutput, EngineError> {
@@ -600,7 +607,13 @@ impl FramePolicy {
         let encoded = self.relighter.encode(image)?;
         let predicted = if want_prediction || source == Source::Unknown {
             self.counts.predictions += 1;
-            Some(self.relighter.predict_light(&encoded)?)
+            let decoded = self.relighter.predict_light(&encoded)?;
+            Some(if self.temporal.colour_tracking {
+                let res = self.relighter.resolution();
+                self.colours.push(face_colour(image, res, face), decoded)
+            } else {
+                decoded
+            })
         } else {
             None
         };

@@ -8,6 +8,8 @@
 //! Beyond the paper, a light predicted from the face (no monitor stream) is first
 //! smoothed exponentially, `P_t = w·p_t + (1−w)·P_{t−1}`: predictions wander from
 //! frame to frame with the face's own shading, and relit brightness would pump.
+//! Before that its colour follows the face's colour changes
+//! ([`crate::engine::colour_tracking`]).
 
 use std::collections::VecDeque;
 
@@ -28,6 +30,9 @@ pub struct Temporal {
     pub average_frames: usize,
     /// Weight w of a new predicted light in its exponential smoothing; 1 turns it off.
     pub prediction_weight: f32,
+    /// Whether a predicted light's colour follows the face's colour changes
+    /// ([`crate::engine::colour_tracking`]).
+    pub colour_tracking: bool,
 }
 
 impl Default for Temporal {
@@ -37,6 +42,7 @@ impl Default for Temporal {
             beta: DEFAULT_BETA,
             average_frames: DEFAULT_AVERAGE_FRAMES,
             prediction_weight: DEFAULT_PREDICTION_WEIGHT,
+            colour_tracking: true,
         }
     }
 }

@@ -180,6 +180,7 @@ impl Settings {
                 self.temporal.average_frames = v.get::<u32>().expect(checked) as usize
             }
             "prediction-weight" => self.temporal.prediction_weight = v.get().expect(checked),
+            "colour-tracking" => self.temporal.colour_tracking = v.get().expect(checked),
             "face-tracking" => self.face_tracking = v.get().expect(checked),
             "face-detector-location" => self.face_detector_location = path_of(v),
             "face-index" => self.face_index = v.get().expect(checked),
@@ -234,6 +235,7 @@ impl Settings {
             "beta" => self.temporal.beta.to_value(),
             "average-frames" => (self.temporal.average_frames as u32).to_value(),
             "prediction-weight" => self.temporal.prediction_weight.to_value(),
+            "colour-tracking" => self.temporal.colour_tracking.to_value(),
             "face-tracking" => self.face_tracking.to_value(),
             "face-detector-location" => path_value(&self.face_detector_location),
             "face-index" => self.face_index.to_value(),
@@ -405,6 +407,12 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .minimum(0.0)
                 .maximum(1.0)
                 .default_value(d.temporal.prediction_weight)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("colour-tracking")
+                .nick("Predicted light's colour from the face")
+                .blurb("Without a monitor stream, let the predicted light's colour follow the face's own colour changes, which a person's skin does not make (beyond the paper); false keeps the light decoder's colour")
+                .default_value(d.temporal.colour_tracking)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecBoolean::builder("face-tracking")

@@ -25,7 +25,7 @@
 use std::f64::consts::PI;
 use std::path::Path;
 
-use crate::light::{LIGHT_COLS, LIGHT_ROWS, Light};
+use crate::light::{LIGHT_COLS, LIGHT_ROWS, Light, srgb_to_linear};
 
 pub const DEFAULT_FOV: f64 = 180.0;
 
@@ -59,14 +59,6 @@ pub struct Panorama {
     width: usize,
     height: usize,
     rgb: Vec<[f32; 3]>,
-}
-
-fn srgb_to_linear(v: f32) -> f32 {
-    if v <= 0.04045 {
-        v / 12.92
-    } else {
-        ((v + 0.055) / 1.055).powf(2.4)
-    }
 }
 
 /// Whether a path names an environment map format that stores linear light.

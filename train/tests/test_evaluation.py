@@ -10,9 +10,9 @@ import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
-from lsyd.evaluation import direction, evaluate
+from lsyd.evaluation import colour_tracking, direction, evaluate
 
-COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound", "direction")
+COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound", "direction", "colour_tracking")
 
 
 def python(*args: str) -> str:
@@ -109,3 +109,37 @@ def test_direction_summary_scores_a_right_model_one_and_a_side_blind_one_zero():
         {"truth_asym": truth, "model_asym": by_source, "truth_strength": strength, "model_strength": strength}, 4
     )
     assert blind["target_slope"] == pytest.approx(0, abs=1e-6)
+
+
+def test_colour_tracking_follows_the_face_and_keeps_the_decoders_mean():
+    """The element's rule: a face turning blue turns the prediction blue by the gain, a steady
+    face leaves the decoder's slow mean, the first frame passes, the channels' sum is kept."""
+    frames = 50
+    face = np.tile([0.5, 0.35, 0.3], (frames, 1))
+    face[25:, 2] *= 1.5  # the face gains blue half way
+    predicted = np.tile([0.3, 0.3, 0.3], (frames, 1))
+    gain = np.array([1.9, 2.0])
+    out = colour_tracking.track(face, predicted, 0.01, gain)
+    assert np.allclose(out[0], predicted[0])
+    assert np.allclose(out[:25], predicted[:25], atol=1e-6)  # steady face, steady grey
+    assert np.allclose(out.sum(1), predicted.sum(1))
+    blue_over_green = np.log(out[25, 2] / out[25, 1])
+    assert blue_over_green == pytest.approx(2.0 * 0.99 * np.log(1.5), rel=1e-3)
+    assert out[25, 0] == pytest.approx(out[25, 1], rel=1e-6)  # red against green unchanged
+
+
+def test_colour_tracking_fit_recovers_a_known_gain():
+    rng = np.random.default_rng(0)
+    sessions = []
+    for skin in ([0.5, 0.35, 0.3], [0.2, 0.12, 0.1]):
+        face_chroma = rng.normal(0, 0.1, (300, 2)).cumsum(0) * 0.1
+        face = np.array(skin) * np.exp(np.column_stack([face_chroma[:, 0], np.zeros(300), face_chroma[:, 1]]))
+        screen = np.exp(np.column_stack([1.5 * face_chroma[:, 0], np.zeros(300), 2.5 * face_chroma[:, 1]]))
+        sessions.append({"face": face, "screen": screen})
+    assert colour_tracking.fit_gain(sessions, 0.005) == pytest.approx([1.5, 2.5], rel=1e-6)
+
+
+def test_colour_tracking_reads_the_region_the_element_reads():
+    """The element's face region for the shipped crop rule at 96 px (colour_tracking.rs)."""
+    rows, cols = colour_tracking.face_region(96, {"side": 2.9, "lift": 0.22})
+    assert (rows.start, rows.stop, cols.start, cols.stop) == (43, 67, 38, 58)

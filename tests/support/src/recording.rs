@@ -335,9 +335,7 @@ pub fn score_face(
         "model-location",
         crate::default_model().to_str().expect("UTF-8 path"),
     );
-    for (k, v) in properties {
-        set_from_str(&r, k, v)?;
-    }
+    set_properties(&r, properties)?;
     score_pipeline(
         &pipeline,
         face,
@@ -353,6 +351,17 @@ pub fn property_setting(text: &str) -> Result<(String, String), String> {
     text.split_once('=')
         .map(|(name, value)| (name.to_string(), value.to_string()))
         .ok_or_else(|| format!("--set {text}: give NAME=VALUE, such as alpha=1"))
+}
+
+/// Sets each NAME=VALUE of `properties` ([`property_setting`]) on the element,
+/// or says which one it refuses and why.
+pub fn set_properties<N: AsRef<str>, V: AsRef<str>>(
+    element: &gst::Element,
+    properties: &[(N, V)],
+) -> Result<(), String> {
+    properties
+        .iter()
+        .try_for_each(|(k, v)| set_from_str(element, k.as_ref(), v.as_ref()))
 }
 
 /// Sets the element's property `name` from `value` as gst-launch would, or says
