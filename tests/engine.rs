@@ -9,17 +9,21 @@ use gstlsydrelight::engine::{
 };
 use gstlsydrelight::frame::FacePlace;
 use gstlsydrelight::light::Light;
+use gstlsydrelight::monitor_match::Features;
 use gstlsydrelight::paths;
 use lsydrelight_testkit::{
-    default_model,
+    checkout, default_model,
     person::{network_input, render_face},
 };
 
 fn relighter(temporal: Temporal) -> FramePolicy {
+    relighter_of(&default_model(), temporal)
+}
+
+fn relighter_of(model: &Path, temporal: Temporal) -> FramePolicy {
     let env = engine::environment(&paths::default_ort_library())
         .expect("ONNX Runtime loads (run scripts/setup.sh)");
-    let network =
-        Relighter::new(env, &default_model(), 2, Provider::Cpu).expect("the shipped model loads");
+    let network = Relighter::new(env, model, 2, Provider::Cpu).expect("the shipped model loads");
     let mut r = FramePolicy::new(network, temporal, Skips::default());
     r.set_target(&Light::uniform([0.8, 0.6, 0.4])).unwrap();
     r
@@ -228,24 +232,21 @@ fn unknown_source_uses_the_predicted_light() {
     );
 }
 
-/// Blue less red over the sum of a light's channel means, as the monitor-match
-/// check reads a light's colour.
-fn blueness(light: &Light) -> f32 {
-    let n = light.0.len() / 3;
-    let [r, g, b] = std::array::from_fn(|c| light.0[c * n..(c + 1) * n].iter().sum::<f32>());
-    (b - r) / (r + g + b)
-}
-
 #[test]
 fn the_predicted_light_turns_the_colour_the_face_turns() {
-    // The light decoder alone hardly reads a screen's colour from a face it was not
-    // trained on; following the face's own colour change, the prediction turns blue
-    // under a blue screen and warm under a warm one.
+    // The starter's light decoder hardly reads a screen's colour from a face it was
+    // not trained on (this person's); following the face's own colour change, the
+    // prediction turns blue under a blue screen and warm under a warm one.
+    let starter = checkout().join("models/starter");
+    let blueness = |light: &Light| Features::of(light).colour;
     let predicted_under = |tracking: bool| {
-        let mut r = relighter(Temporal {
-            colour_tracking: tracking,
-            ..Temporal::default()
-        });
+        let mut r = relighter_of(
+            &starter,
+            Temporal {
+                colour_tracking: tracking,
+                ..Temporal::default()
+            },
+        );
         let mut predict = |screen: deskstage::math::Vec3| {
             let img = image(&r, screen);
             let out = r
@@ -268,6 +269,10 @@ fn the_predicted_light_turns_the_colour_the_face_turns() {
     // The screens themselves: 0.41 and -0.47.
     let screens =
         blueness(&Light::uniform([0.3, 0.4, 1.0])) - blueness(&Light::uniform([1.0, 0.5, 0.2]));
+    assert!(
+        blue - warm > 2.0 * (decoder_blue - decoder_warm),
+        "tracking follows the face no better than the decoder alone"
+    );
     assert!(
         blue > 0.1 && warm < -0.1 && blue - warm > 0.5 * screens,
         "tracked: {blue:.3} under blue, {warm:.3} under warm (the screens differ by {screens:.3})"

@@ -411,7 +411,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecBoolean::builder("colour-tracking")
                 .nick("Predicted light's colour from the face")
-                .blurb("Without a monitor stream, let the predicted light's colour follow the face's own colour changes, which a person's skin does not make (beyond the paper); false keeps the light decoder's colour")
+                .blurb("Let the light predicted from the face (the source light without a monitor stream, monitor_src, match-check) take its colour changes from the face's own: skin keeps its colour, so they come from the light (beyond the paper); false keeps the light decoder's colour")
                 .default_value(d.temporal.colour_tracking)
                 .mutable_playing()
                 .build(),

@@ -156,11 +156,12 @@ def read(path: Path) -> dict:
     return m
 
 
-_SRGB_TO_LINEAR = np.where(
-    np.arange(256) / 255.0 <= 0.04045,
-    np.arange(256) / 255.0 / 12.92,
-    ((np.arange(256) / 255.0 + 0.055) / 1.055) ** 2.4,
-).astype(np.float32)
+def srgb_to_linear(v: np.ndarray) -> np.ndarray:
+    """sRGB values in [0, 1] as linear light (the sRGB transfer function inverted)."""
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+_SRGB_TO_LINEAR = srgb_to_linear(np.arange(256) / 255.0).astype(np.float32)
 
 
 def light_from_frames(frames: np.ndarray) -> np.ndarray:

@@ -45,14 +45,10 @@ def face_region(resolution: int, crop: dict) -> tuple[slice, slice]:
     centre = (0.5, 0.5 + crop["lift"] / crop["side"])
 
     def span(c: float, half: float) -> slice:
-        lo = max(int(np.floor((c - half * height) * resolution)), 0)
+        lo = min(max(int(np.floor((c - half * height) * resolution)), 0), resolution - 1)
         return slice(lo, max(int(np.ceil((c + half * height) * resolution)), lo + 1))
 
     return span(centre[1], HALF_HEIGHT), span(centre[0], HALF_WIDTH)
-
-
-def srgb_to_linear(v: np.ndarray) -> np.ndarray:
-    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
 def chroma(rgb: np.ndarray) -> np.ndarray:
@@ -73,8 +69,8 @@ def departures(x: np.ndarray, weight: float) -> np.ndarray:
 def track(face: np.ndarray, predicted: np.ndarray, weight: float, gain: np.ndarray) -> np.ndarray:
     """The element's rule on per-frame mean colours: (T, 3) face and predicted light in, the
     predicted light's mean colour tracked out (same sum of channels)."""
+    # The departures start at zero, so the first frame passes as it is.
     want = chroma(predicted) - departures(chroma(predicted), weight) + gain * departures(chroma(face), weight)
-    want[0] = chroma(predicted[0])  # the first frame passes as it is
     shift = want - chroma(predicted)
     tinted = predicted * np.exp(np.stack([shift[:, 0], np.zeros(len(shift)), shift[:, 1]], 1))
     return tinted * (predicted.sum(1) / tinted.sum(1))[:, None]
@@ -87,12 +83,12 @@ def colour(rgb: np.ndarray) -> np.ndarray:
 def session_colours(net, session: Path, resolution: int, region) -> dict[str, np.ndarray]:
     """Per frame: the face region's mean linear colour, the screen's and the predicted light's."""
     images, lights = data.session_frames(session, resolution)
-    face = srgb_to_linear(images[:, region[0], region[1]] / 255.0).mean((1, 2))
+    face = contract.srgb_to_linear(images[:, region[0], region[1]] / 255.0).mean((1, 2))
     predicted = []
     with torch.no_grad():
         for i in range(0, len(images), 100):
             _, feats = net.encode(data.to_tensor(images[i : i + 100]))
-            predicted.append(net.light_decoder(feats[1], feats[3], feats[5]).numpy().mean((2, 3)))
+            predicted.append(net.predict_light(feats).numpy().mean((2, 3)))
     return {"face": face, "screen": lights.mean((2, 3)), "predicted": np.concatenate(predicted)}
 
 
@@ -105,7 +101,7 @@ def fit_gain(sessions: list[dict], weight: float) -> np.ndarray:
 
 def correlations(sessions: list[dict], weight: float, gain: np.ndarray) -> dict[str, list[float]]:
     def corr(a, b):
-        return float(np.corrcoef(colour(a), colour(b))[0, 1])
+        return round(float(np.corrcoef(colour(a), colour(b))[0, 1]), 4)
 
     return {
         "decoder": [corr(s["predicted"], s["screen"]) for s in sessions],
