@@ -21,7 +21,10 @@
 //!
 //! Last, it times what the crop, the paste and the denoising pay to split
 //! their work between two threads (`parallel::beside` with nothing to do),
-//! which sets the sizes from which they split.
+//! which sets the sizes from which they split; and the colour tracking's read of
+//! the face's colour from the network's input (`colour_tracking::face_colour`,
+//! once a network run when the light is predicted), which does not depend on the
+//! frame's size.
 //!
 //! Each round times every size and format once, in turn, so a busy machine
 //! slows all of them alike rather than whichever ran at that moment. Every
@@ -32,6 +35,7 @@ use std::time::Instant;
 
 use clap::Parser;
 
+use gstlsydrelight::engine::colour_tracking::face_colour;
 use gstlsydrelight::frame::{
     Crop, DetailDenoiser, FacePlace, LightingChange, OwnedFrame, PixelFormat, YuvMatrix,
     sample_crop,
@@ -113,6 +117,8 @@ fn main() {
 
     let mut cases: Vec<Case> = Vec::new();
     let mut thread_ms = Vec::with_capacity(rounds * THREAD_STARTS);
+    let mut face_colour_ms = Vec::with_capacity(rounds);
+    let mut network_input = Vec::new();
     // Each case's frame is seeded by its place among all cases, so `--only`
     // times the same frames as a full run.
     let all = SIZES
@@ -126,6 +132,7 @@ fn main() {
         let buffers = noisy_frame(format, width, height, seed);
         let crop = Crop::centred(width, height, 0.5, 0.5, 1.0);
         let input = sample_crop(&buffers.frame(), crop, RES);
+        network_input.clone_from(&input);
         // A plausible change: darker overall, brighter towards one side.
         let relit: Vec<f32> = input
             .iter()
@@ -181,6 +188,15 @@ fn main() {
             std::hint::black_box(beside(|| std::hint::black_box(1), || 2));
             thread_ms.push(start.elapsed().as_secs_f64() * 1e3);
         }
+        if !network_input.is_empty() {
+            let start = Instant::now();
+            std::hint::black_box(face_colour(
+                std::hint::black_box(&network_input),
+                RES,
+                FacePlace::default(),
+            ));
+            face_colour_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        }
     }
 
     println!("{rounds} rounds, ms per frame: median (min-max)");
@@ -203,4 +219,10 @@ fn main() {
         "handing work to another thread and back (parallel::beside): {} ms",
         summary(&mut thread_ms)
     );
+    if !face_colour_ms.is_empty() {
+        println!(
+            "the face's colour for the colour tracking, once a network run: {} ms",
+            summary(&mut face_colour_ms)
+        );
+    }
 }
