@@ -88,39 +88,24 @@ fn features_are_smoothed_exponentially() {
     });
     let a = image(&r, deskstage::math::Vec3::new(1.0, 1.0, 1.0));
     let b = image(&r, deskstage::math::Vec3::new(0.3, 0.3, 0.6));
-    r.relight(
-        &a,
-        FacePlace::default(),
-        Source::Known(light.clone()),
-        false,
-    )
-    .unwrap();
+    let relight_lit = |r: &mut FramePolicy, img: &[f32]| {
+        r.relight(
+            img,
+            FacePlace::default(),
+            Source::Known(light.clone()),
+            false,
+        )
+        .unwrap();
+    };
+    relight_lit(&mut r, &a);
     let fa = r.smoothed_features().unwrap().to_vec();
     r.reset();
-    r.relight(
-        &b,
-        FacePlace::default(),
-        Source::Known(light.clone()),
-        false,
-    )
-    .unwrap();
+    relight_lit(&mut r, &b);
     let fb = r.smoothed_features().unwrap().to_vec();
     r.reset();
     // f_t = α f_t + (1 − α) f_{t−1}: frame b after frame a.
-    r.relight(
-        &a,
-        FacePlace::default(),
-        Source::Known(light.clone()),
-        false,
-    )
-    .unwrap();
-    r.relight(
-        &b,
-        FacePlace::default(),
-        Source::Known(light.clone()),
-        false,
-    )
-    .unwrap();
+    relight_lit(&mut r, &a);
+    relight_lit(&mut r, &b);
     let fab = r.smoothed_features().unwrap();
     for (level, ((x, y), z)) in fa.iter().zip(&fb).zip(fab).enumerate() {
         let want: Vec<f32> = x
