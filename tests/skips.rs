@@ -245,7 +245,7 @@ fn late_frames_reuse_the_relighting_and_say_so() {
 }
 
 #[test]
-fn only_the_face_region_and_its_fade_are_touched() {
+fn only_the_head_the_shoulders_and_their_fade_are_touched() {
     let (w, ht) = (640u32, 480u32);
     let img = render_person(&State::default(), Vec3::new(1.0, 1.0, 1.0), w, ht);
     for format in [gst_video::VideoFormat::I420, gst_video::VideoFormat::Bgrx] {
@@ -260,14 +260,19 @@ fn only_the_face_region_and_its_fade_are_touched() {
         let input = buffer(&img, &c, gst::ClockTime::ZERO, FRAME);
         h.push(input.clone()).unwrap();
         let out = h.pull().unwrap();
-        // The crop is the centred 240 x 240 square. The change is whole within
-        // a circle a quarter of its side across (60 pixels) and fades out over
-        // a quarter of its side beyond: past 60 + 60 pixels from its centre,
-        // and the field's grid cell (15 pixels) of interpolation, everything
-        // is byte for byte the input.
+        // The crop is the centred 240 x 240 square, the face 240 / 2.9 = 82.8
+        // pixels high in it. The change is whole within a circle of a quarter
+        // of the crop's side (60 pixels) about its centre, the head, joined
+        // below the face to a band 1.3 face heights (108 pixels) either side
+        // of the face's middle that runs down out of the frame, the shoulders;
+        // it fades out over a quarter of the crop's side (60 pixels) beyond.
+        // Above the crop's centre past 60 + 60 pixels from it, and beside the
+        // band past 108 + 60 pixels, each with the field's grid cell (15
+        // pixels) of interpolation, everything is byte for byte the input.
         let (a, b) = (input.map_readable().unwrap(), out.map_readable().unwrap());
         let info = gst_video::VideoInfo::from_caps(&c).unwrap();
         let (cx, cy, reach) = (320.0f32, 240.0f32, 60.0 + 60.0 + 15.0);
+        let beside_the_band = 1.3 * 240.0 / 2.9 + 60.0 + 15.0;
         let stride = info.stride()[0] as usize;
         let bpp = if format == gst_video::VideoFormat::I420 {
             1
@@ -281,7 +286,9 @@ fn only_the_face_region_and_its_fade_are_touched() {
                 let distance = (x as f32 + 0.5 - cx).hypot(y as f32 + 0.5 - cy);
                 if distance <= 60.0 {
                     inside_changed += (a[i] != b[i]) as usize;
-                } else if distance > reach {
+                } else if distance > reach && (y as f32) < cy
+                    || (x as f32 + 0.5 - cx).abs() > beside_the_band
+                {
                     assert_eq!(
                         a[i], b[i],
                         "{format:?}: pixel ({x}, {y}) beyond the fade changed"
@@ -293,5 +300,9 @@ fn only_the_face_region_and_its_fade_are_touched() {
             inside_changed > 1000,
             "{format:?}: the face region is relit"
         );
+        // 200 pixels below the crop's centre, under the face, the shoulders
+        // are relit too.
+        let shoulders = (cy as usize + 200) * stride + cx as usize * bpp;
+        assert_ne!(a[shoulders], b[shoulders], "{format:?}: the shoulders");
     }
 }

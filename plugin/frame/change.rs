@@ -20,12 +20,14 @@ const INVENTED_LIGHT: f32 = 0.004;
 /// The lighting change at network resolution: per RGB channel the log of a
 /// smooth gain of the frame, `(v' + ε) = g · (v + ε)`, taken from the network's
 /// output over its input. Applied as a [`GainField`] that carries it beyond the
-/// crop and fades it out round the face, so the change has no edge anywhere in
-/// the frame.
+/// crop and fades it out round head and shoulders, so the change has no edge
+/// anywhere in the frame.
 pub struct LightingChange {
     pub(super) res: usize,
     /// Per channel (R, G, B), the log of the gain, smoothed, res × res.
     pub(super) log_gain: [Vec<f32>; 3],
+    /// Where the face is in the crop: the field's silhouette is placed by it.
+    pub(super) face: FacePlace,
 }
 
 /// Where the face is in the network's crop, in fractions of the crop's side:
@@ -71,6 +73,7 @@ impl LightingChange {
         LightingChange {
             res,
             log_gain: smooth_log_gain(&input, &relit, res, face),
+            face,
         }
     }
 

@@ -236,6 +236,7 @@ fn random_change(res: usize, wild: bool, noise: &mut Noise) -> LightingChange {
     LightingChange {
         res,
         log_gain: [0, 1, 2].map(|c| log_gain[c * n..(c + 1) * n].to_vec()),
+        face: FacePlace::default(),
     }
 }
 
@@ -599,8 +600,10 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
         (centre - expected).abs() <= 1.0,
         "{centre} at the centre, not {expected}"
     );
-    // Nothing beyond the fade; something at the crop's corners and beyond its sides.
-    for y in 0..h {
+    // Nothing beyond the fade above the face (below it the change runs on
+    // down the body: the next test); something at the crop's corners and
+    // beyond its sides.
+    for y in 0..60 {
         for x in 0..w {
             let distance = (x as f32 + 0.5 - 120.0).hypot(y as f32 + 0.5 - 80.0);
             if distance > INNER_RADIUS * 60.0 + feather as f32 + 2.0 {
@@ -621,6 +624,48 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
     // No step anywhere: a smoothstep of ln 1.5 over the feather rises at most
     // 1.5 · ln 1.5 / feather a pixel (0.015), and dither and rounding move
     // each pixel by up to a level (0.01) either way. A box would step by 0.4.
+    let mut steepest = 0f32;
+    for y in 1..h {
+        for x in 1..w {
+            steepest = steepest
+                .max((ratio(x, y) - ratio(x - 1, y)).abs())
+                .max((ratio(x, y) - ratio(x, y - 1)).abs());
+        }
+    }
+    assert!(steepest < 0.036, "steepest step {steepest}");
+}
+
+#[test]
+fn the_change_runs_down_the_shoulders_and_not_beside_them() {
+    // A face in the frame's top quarter, the rest of the frame below it: the
+    // light on a face falls on its neck and shoulders too, so the change
+    // goes on down the body, whole, however far below the crop; beside the
+    // shoulders it fades out as it does round the head, with no step.
+    let (w, h) = (480, 320);
+    let crop = Crop {
+        x: 210,
+        y: 30,
+        size: 60,
+    };
+    let feather = 60;
+    let (before, after) = gained((w, h), |_, _| [100; 3], crop, feather, |_, _| 1.5);
+    let ratio = |x: usize, y: usize| {
+        let i = (y * w + x) * 3 + 1;
+        (after[i] as f32 / before[i] as f32).ln()
+    };
+    let whole = ratio(240, 60);
+    assert!(whole > 0.3, "at the face: {whole}");
+    // 200 pixels below the crop, 10 face heights below the face, where a
+    // disc round the head has long faded out.
+    for x in [225, 240, 255] {
+        let r = ratio(x, 300);
+        assert!((r - whole).abs() < 0.02, "({x}, 300): {r} against {whole}");
+    }
+    // Beside the shoulders (the face 20.7 pixels high, the body 1.3 face
+    // heights either side of its middle) and a feather beyond: nothing.
+    for x in (0..140).chain(341..w) {
+        assert_eq!(ratio(x, 300), 0.0, "({x}, 300)");
+    }
     let mut steepest = 0f32;
     for y in 1..h {
         for x in 1..w {

@@ -38,7 +38,8 @@
 //! A relit frame carries a `GstVideoRegionOfInterestMeta` of type `face` naming that
 //! square, with a parameter structure `lsydrelight` holding how much of the change shows
 //! (`strength`, a double in [0, 1]: less while a face fades in or out), the fade's
-//! width beyond the square's inner circle (`feather`, an unsigned int, in pixels) and the
+//! width beyond the head and shoulders it covers whole (`feather`, an unsigned int, in
+//! pixels) and the
 //! face in the square (`face-x`, `face-y`: ints; `face-size`, an unsigned int: one face
 //! height square about the face's centre, which sits higher in the square when the square
 //! was moved down to stay inside the frame), so that downstream elements and measures know

@@ -460,7 +460,7 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .build(),
             glib::ParamSpecDouble::builder("feather")
                 .nick("Feather")
-                .blurb("Width, as a fraction of the face region, over which the relighting fades out beyond a circle round the face")
+                .blurb("Width, as a fraction of the face region, over which the relighting fades out beyond the head and shoulders it relights whole")
                 .minimum(0.0)
                 .maximum(1.0)
                 .default_value(DEFAULT_FEATHER)
