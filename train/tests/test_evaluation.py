@@ -10,9 +10,19 @@ import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
-from lsyd.evaluation import colour_tracking, direction, evaluate
+from lsyd.evaluation import colour_tracking, direction, evaluate, key_colour
 
-COMMANDS = ("evaluate", "compare", "benchmark", "modelcard", "seeds", "detail_bound", "direction", "colour_tracking")
+COMMANDS = (
+    "evaluate",
+    "compare",
+    "benchmark",
+    "modelcard",
+    "seeds",
+    "detail_bound",
+    "direction",
+    "colour_tracking",
+    "key_colour",
+)
 
 
 def python(*args: str) -> str:
@@ -143,3 +153,20 @@ def test_colour_tracking_reads_the_region_the_element_reads():
     """The element's face region for the shipped crop rule at 96 px (colour_tracking.rs)."""
     rows, cols = colour_tracking.face_region(96, {"side": 2.9, "lift": 0.22})
     assert (rows.start, rows.stop, cols.start, cols.stop) == (43, 67, 38, 58)
+
+
+def test_key_colour_spreads_a_light_evenly_with_its_colour_and_power():
+    light = np.zeros((1, 3, 16, 32), np.float32)
+    light[0, :, 4:8, 0:6] = np.array([1.0, 0.6, 0.3])[:, None, None]
+    spread = key_colour.even_spread(light)
+    assert spread.shape == light.shape
+    assert np.allclose(spread.mean(axis=(2, 3)), light.mean(axis=(2, 3)))
+    assert np.allclose(spread, spread[:, :, :1, :1])
+
+
+def test_key_colour_reads_warmth_over_the_face_middle_only():
+    image = np.full((3, 96, 96), 0.5, np.float32)
+    assert key_colour.warmth(image) == pytest.approx(0.0)
+    image[0, 34:62, 37:59] = 0.8  # warmer over the face's middle
+    image[2, :10, :] = 1.0  # bluer far from the face
+    assert key_colour.warmth(image) > 0.3

@@ -8,6 +8,8 @@
 - ``seeds``: issue 16's four cells over several seeds, from ``evaluate``'s records;
 - ``real_direction``: how much of a light's side the network itself draws on real faces;
 - ``detail_bound``: how much of the detail band a change at a given resolution can remove;
+- ``key_colour``: how much of a local light's colour a model gives a face, against the same
+  light spread evenly;
 - ``metrics``: the image and temporal metrics they share, and the one loop that scores
   a network on a 9 x 9 test set.
 
