@@ -78,6 +78,7 @@ struct Case {
     change: LightingChange,
     denoiser: DetailDenoiser,
     small_crop: Crop,
+    small_feather: usize,
     small_denoiser: DetailDenoiser,
     crop_ms: Vec<f64>,
     denoise_ms: Vec<f64>,
@@ -141,6 +142,7 @@ fn main() {
             .enumerate()
             .map(|(i, v)| (0.8 * v + 0.2 * (i % RES) as f32 / RES as f32).min(1.0))
             .collect();
+        let small_crop = Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP);
         cases.push(Case {
             name,
             change: LightingChange::new(&input, &relit, RES, FacePlace::default()),
@@ -148,7 +150,8 @@ fn main() {
             crop,
             feather: (FEATHER * crop.size as f64).round() as usize,
             denoiser: DetailDenoiser::default(),
-            small_crop: Crop::centred(width, height, 0.5, 0.5, SMALL_FACE_CROP),
+            small_crop,
+            small_feather: (FEATHER * small_crop.size as f64).round() as usize,
             small_denoiser: DetailDenoiser::default(),
             crop_ms: Vec::with_capacity(rounds),
             denoise_ms: Vec::with_capacity(rounds),
@@ -172,9 +175,12 @@ fn main() {
             case.denoise_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
-            let feather = (FEATHER * case.small_crop.size as f64).round() as usize;
-            case.small_denoiser
-                .apply(&mut case.buffers.frame_mut(), case.small_crop, feather, 1.0);
+            case.small_denoiser.apply(
+                &mut case.buffers.frame_mut(),
+                case.small_crop,
+                case.small_feather,
+                1.0,
+            );
             case.small_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
@@ -183,8 +189,11 @@ fn main() {
             case.paste_ms.push(start.elapsed().as_secs_f64() * 1e3);
 
             let start = Instant::now();
-            case.change
-                .apply(&mut case.buffers.frame_mut(), case.small_crop, feather);
+            case.change.apply(
+                &mut case.buffers.frame_mut(),
+                case.small_crop,
+                case.small_feather,
+            );
             case.small_paste_ms
                 .push(start.elapsed().as_secs_f64() * 1e3);
 

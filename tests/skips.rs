@@ -302,7 +302,13 @@ fn only_the_head_the_shoulders_and_their_fade_are_touched() {
         );
         // 200 pixels below the crop's centre, under the face, the shoulders
         // are relit too.
-        let shoulders = (cy as usize + 200) * stride + cx as usize * bpp;
-        assert_ne!(a[shoulders], b[shoulders], "{format:?}: the shoulders");
+        let row = (cy as usize + 200) * stride;
+        let shoulders = (cx as usize - 40..cx as usize + 40)
+            .filter(|&x| a[row + x * bpp] != b[row + x * bpp])
+            .count();
+        assert!(
+            shoulders > 40,
+            "{format:?}: {shoulders} of 80 shoulder pixels relit"
+        );
     }
 }

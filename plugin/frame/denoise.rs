@@ -165,7 +165,7 @@ impl DetailDenoiser {
     }
 
     /// Denoises `frame` round `crop`, as far as the lighting change of fade
-    /// `feather` reaches: whole through the change's inner circle and
+    /// `feather` reaches round the head: whole through the change's inner circle and
     /// [`WHOLE_FADE`] of its fade, then fading out, at `strength` in [0, 1]
     /// (a face fading in or out).
     pub fn apply(&mut self, frame: &mut FrameMut, crop: Crop, feather: usize, strength: f32) {

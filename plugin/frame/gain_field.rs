@@ -6,14 +6,15 @@
 //! The field holds the network's change (continued beyond the crop as it is at
 //! the crop's nearest point) faded out round the person: whole within a
 //! silhouette of head and shoulders ([`Silhouette`]: a circle of
-//! [`INNER_RADIUS`] of the crop's side about the crop's centre, joined at the
+//! [`INNER_RADIUS`] of the crop's side about the crop's centre, joined by a
 //! neck to a band as wide as the shoulders that runs down out of the frame),
 //! falling by smoothstep to nothing `feather` pixels beyond it. The
 //! silhouette's edge is rounded everywhere, so it has no straight edge, and its
 //! fade is the only place where the change ends.
 //!
 //! Built per frame on a grid of [`CELLS_PER_CROP`] cells across the crop (a
-//! few thousand cells, an `exp` each per channel); the paste interpolates a
+//! few thousand cells, more where the shoulders' band runs down a frame many
+//! crops tall, an `exp` each per channel); the paste interpolates a
 //! grid row across the plane once per cell's worth of rows and then runs one
 //! multiply-add per byte, with no division or call in the loop.
 
@@ -21,7 +22,7 @@ pub(super) mod yuv;
 
 use std::ops::Range;
 
-use super::{Crop, FrameMut, LightingChange, PixelFormat, YuvMatrix, round_to_u8};
+use super::{Crop, FacePlace, FrameMut, LightingChange, PixelFormat, YuvMatrix, round_to_u8};
 use crate::parallel::beside;
 use yuv::YuvChange;
 
@@ -37,14 +38,18 @@ const CELLS_PER_CROP: f32 = 16.0;
 pub const INNER_RADIUS: f32 = 0.25;
 
 /// The body's shape under the face, in face heights (BlazeFace's box,
-/// hairline to chin; shoulders are about two across): its top edge this far
-/// below the face's centre, under the chin and neck ...
+/// hairline to chin): its top edge this far below the face's centre, under
+/// the chin and neck ...
 const SHOULDERS_BELOW: f32 = 0.9;
-/// ... half its width ...
+/// ... half its width: shoulders are about two face heights across, and the
+/// band is wider so that the tops of the arms, and shoulders the face box
+/// lags behind as the person turns, stay within it ...
 const BODY_HALF_WIDTH: f32 = 1.3;
 /// ... the radius of its top corners, the shoulders' curve ...
 const SHOULDER_RADIUS: f32 = 0.6;
-/// ... and how far head and body are rounded into each other at the neck.
+/// ... half the width of the neck that joins it to the head ...
+const NECK_HALF_WIDTH: f32 = 0.35;
+/// ... and how far head, neck and body are rounded into each other.
 const NECK_BLEND: f32 = 0.5;
 
 /// Frames of fewer rows are pasted on one thread: handing half to a second
@@ -93,10 +98,8 @@ impl GainField {
     ) -> GainField {
         let side = crop.size.max(1) as f32;
         let cell = side / CELLS_PER_CROP;
-        let inner = INNER_RADIUS * side;
         let feather = feather as f32;
-        let centre = [crop.x as f32 + side / 2.0, crop.y as f32 + side / 2.0];
-        let silhouette = Silhouette::new(crop, change.face, inner, feather);
+        let silhouette = Silhouette::new(crop, change.face, feather);
         // The grid covers the fade round the silhouette and one identity cell
         // beyond it, so interpolation past its edge (clamped to it) changes
         // nothing; where the frame ends first, it ends with the frame.
@@ -106,7 +109,7 @@ impl GainField {
             let last = (high[axis] / cell + 1.0)
                 .ceil()
                 .min((extent as f32 / cell).ceil());
-            (first, ((last - first).max(0.0) as usize).max(2))
+            (first, ((last - first) as usize).max(2))
         };
         let ((x0, columns), (y0, rows)) = (span(0, width), span(1, height));
         let origin = [x0 * cell, y0 * cell];
@@ -150,7 +153,7 @@ impl GainField {
             gain,
             yuv: yuv_change.map(|y| (y, luma_gain)),
             spans,
-            undithered: Undithered::new(centre, inner),
+            undithered: Undithered::new(silhouette.head, silhouette.head_radius),
         }
     }
 
@@ -447,20 +450,20 @@ fn dither_runs<'a>(
 }
 
 /// Where the change shows whole, in frame pixels: the head, a circle of
-/// [`INNER_RADIUS`] of the crop about its centre, joined to the shoulders and
-/// body below the face, a band of rounded top corners that runs down out of
-/// the frame. The light that falls on a face falls on its neck and
+/// [`INNER_RADIUS`] of the crop about its centre, joined by a neck to the
+/// shoulders and body below the face, a band of rounded top corners that runs
+/// down out of the frame, all three rounded into each other. The light that falls on a face falls on its neck and
 /// shoulders too: a head relit on a body left as filmed reads as a mask.
 ///
 /// Against the circle alone, on the simulator's `call` against exact truth
 /// (`examples/target_lights measure --frames 60 --model models/starter`),
-/// every target came closer, studio 12.92 to 10.40, warm-key-left 7.22 to
-/// 6.96, neon 12.53 to 11.17, rim 5.37 to 5.36; on real footage the box
+/// every target came closer but rim, studio 12.92 to 10.41, warm-key-left
+/// 7.22 to 6.95, neon 12.53 to 11.18, rim 5.37 as before; on real footage the box
 /// edges and the face's mottling stayed as they were (`benchmark
 /// --quality`). The body's shape is a person's, not the picture's: where
 /// arms or hair leave it, they keep their light, and the wall beside the
 /// shoulders takes part of the change in the fade, as round the head.
-struct Silhouette {
+pub(super) struct Silhouette {
     head: [f32; 2],
     head_radius: f32,
     /// The middle of the body's top edge, half its width, and the radius of
@@ -468,13 +471,15 @@ struct Silhouette {
     body_top: [f32; 2],
     body_half_width: f32,
     shoulder_radius: f32,
-    /// How far the union is rounded where head and body meet, the neck.
+    /// Half the width of the neck, from the head's centre to the body's top.
+    neck_half_width: f32,
+    /// How far the union is rounded where its parts meet.
     neck_blend: f32,
     feather: f32,
 }
 
 impl Silhouette {
-    fn new(crop: Crop, face: super::FacePlace, head_radius: f32, feather: f32) -> Silhouette {
+    pub(super) fn new(crop: Crop, face: FacePlace, feather: f32) -> Silhouette {
         let side = crop.size.max(1) as f32;
         let face_height = face.height * side;
         let face_centre = [
@@ -483,13 +488,14 @@ impl Silhouette {
         ];
         Silhouette {
             head: [crop.x as f32 + side / 2.0, crop.y as f32 + side / 2.0],
-            head_radius,
+            head_radius: INNER_RADIUS * side,
             body_top: [
                 face_centre[0],
                 face_centre[1] + SHOULDERS_BELOW * face_height,
             ],
             body_half_width: BODY_HALF_WIDTH * face_height,
             shoulder_radius: SHOULDER_RADIUS * face_height,
+            neck_half_width: NECK_HALF_WIDTH * face_height,
             neck_blend: NECK_BLEND * face_height,
             feather,
         }
@@ -497,7 +503,7 @@ impl Silhouette {
 
     /// Signed distance from frame point `p` to the silhouette's edge,
     /// negative inside.
-    fn distance(&self, p: [f32; 2]) -> f32 {
+    pub(super) fn distance(&self, p: [f32; 2]) -> f32 {
         let head = (p[0] - self.head[0]).hypot(p[1] - self.head[1]) - self.head_radius;
         // A box's signed distance, its top corners rounded and its bottom
         // below any frame.
@@ -505,17 +511,33 @@ impl Silhouette {
         let qx = (p[0] - self.body_top[0]).abs() - (self.body_half_width - round);
         let qy = (self.body_top[1] + round) - p[1];
         let body = qx.max(0.0).hypot(qy.max(0.0)) + qx.max(qy).min(0.0) - round;
-        smooth_min(head, body, self.neck_blend)
+        // A capsule from the head's centre to the body's top: however far
+        // below the head the crop rule puts the shoulders, they are joined.
+        let along = [
+            self.body_top[0] - self.head[0],
+            self.body_top[1] - self.head[1],
+        ];
+        let t = ((p[0] - self.head[0]) * along[0] + (p[1] - self.head[1]) * along[1])
+            / (along[0] * along[0] + along[1] * along[1]).max(f32::EPSILON);
+        let t = t.clamp(0.0, 1.0);
+        let neck = (p[0] - self.head[0] - t * along[0]).hypot(p[1] - self.head[1] - t * along[1])
+            - self.neck_half_width;
+        let k = self.neck_blend;
+        smooth_min(smooth_min(head, neck, k), body, k)
     }
 
     /// The frame box, low and high corners, outside which nothing changes.
-    fn bounds(&self) -> ([f32; 2], [f32; 2]) {
-        let head_reach = self.head_radius + self.feather;
-        let body_reach = self.body_half_width + self.feather;
+    /// Each of the two smooth minima reaches up to a quarter of its rounding
+    /// beyond the plain union (the neck lies within the head's and body's
+    /// reach).
+    pub(super) fn bounds(&self) -> ([f32; 2], [f32; 2]) {
+        let slack = 0.5 * self.neck_blend;
+        let head_reach = self.head_radius + self.feather + slack;
+        let body_reach = self.body_half_width + self.feather + slack;
         (
             [
                 (self.head[0] - head_reach).min(self.body_top[0] - body_reach),
-                self.head[1] - head_reach,
+                (self.head[1] - head_reach).min(self.body_top[1] - self.feather - slack),
             ],
             [
                 (self.head[0] + head_reach).max(self.body_top[0] + body_reach),

@@ -1,9 +1,9 @@
 use super::*;
 use crate::frame::change::MAX_GAIN;
-use crate::frame::gain_field::INNER_RADIUS;
 use crate::frame::gain_field::yuv::{
     YuvChange, chroma_change, chroma_change_portable, spread, spread_portable, write_lane,
 };
+use crate::frame::gain_field::{INNER_RADIUS, Silhouette};
 use crate::frame::gain_field::{dither, gain_row, gain_row_portable};
 use crate::frame::reference;
 
@@ -600,13 +600,13 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
         (centre - expected).abs() <= 1.0,
         "{centre} at the centre, not {expected}"
     );
-    // Nothing beyond the fade above the face (below it the change runs on
-    // down the body: the next test); something at the crop's corners and
+    // Nothing beyond the fade round head and shoulders (a grid cell, 3.75
+    // pixels, of interpolation aside); something at the crop's corners and
     // beyond its sides.
-    for y in 0..60 {
+    let silhouette = Silhouette::new(crop, FacePlace::default(), feather as f32);
+    for y in 0..h {
         for x in 0..w {
-            let distance = (x as f32 + 0.5 - 120.0).hypot(y as f32 + 0.5 - 80.0);
-            if distance > INNER_RADIUS * 60.0 + feather as f32 + 2.0 {
+            if silhouette.distance([x as f32 + 0.5, y as f32 + 0.5]) > feather as f32 + 5.0 {
                 assert_eq!(ratio(x, y), 0.0, "({x}, {y})");
             }
         }
@@ -655,7 +655,7 @@ fn the_change_runs_down_the_shoulders_and_not_beside_them() {
     };
     let whole = ratio(240, 60);
     assert!(whole > 0.3, "at the face: {whole}");
-    // 200 pixels below the crop, 10 face heights below the face, where a
+    // 200 pixels below the crop, 11 face heights below the face, where a
     // disc round the head has long faded out.
     for x in [225, 240, 255] {
         let r = ratio(x, 300);
@@ -675,6 +675,80 @@ fn the_change_runs_down_the_shoulders_and_not_beside_them() {
         }
     }
     assert!(steepest < 0.036, "steepest step {steepest}");
+    // With a narrow fade, the neck between chin and shoulders is whole too:
+    // head and body are one shape, not two with a gap between.
+    let (before, after) = gained((w, h), |_, _| [100; 3], crop, 6, |_, _| 1.5);
+    let i = (79 * w + 240) * 3 + 1;
+    let neck = (after[i] as f32 / before[i] as f32).ln();
+    assert!(
+        (neck - whole).abs() < 0.02,
+        "at the neck: {neck} against {whole}"
+    );
+}
+
+#[test]
+fn the_silhouette_joins_head_neck_and_shoulders_wherever_the_face_sits() {
+    // The crop rule's face, a large face low in its crop and a small one
+    // high in it (crops moved to stay inside the frame).
+    let crop = Crop {
+        x: 100,
+        y: 100,
+        size: 120,
+    };
+    let places = [
+        FacePlace::default(),
+        FacePlace {
+            centre: [0.45, 0.7],
+            height: 0.5,
+        },
+        FacePlace {
+            centre: [0.55, 0.3],
+            height: 0.25,
+        },
+    ];
+    for face in places {
+        let s = Silhouette::new(crop, face, 0.0);
+        let centre = [160.0, 160.0];
+        let face_centre = [
+            100.0 + 120.0 * face.centre[0],
+            100.0 + 120.0 * face.centre[1],
+        ];
+        let face_height = 120.0 * face.height;
+        // From the head's centre to the face's, then down to three face
+        // heights below it: inside all the way.
+        for step in 0..=100 {
+            let t = step as f32 / 100.0;
+            let on_line = [
+                centre[0] + t * (face_centre[0] - centre[0]),
+                centre[1] + t * (face_centre[1] + 3.0 * face_height - centre[1]),
+            ];
+            assert!(
+                s.distance(on_line) <= 0.0,
+                "{face:?}: {on_line:?} is outside"
+            );
+        }
+        // Beside the shoulders, past the band's half width: outside.
+        let beside = [
+            face_centre[0] + 1.5 * face_height,
+            face_centre[1] + 3.0 * face_height,
+        ];
+        assert!(s.distance(beside) > 0.0, "{face:?}: {beside:?} is inside");
+        // The bounds hold everything within a feather of the shape.
+        let feather = 30.0;
+        let s = Silhouette::new(crop, face, feather);
+        let (low, high) = s.bounds();
+        for y in -200..600 {
+            for x in -200..600 {
+                let p = [x as f32, y as f32];
+                if s.distance(p) < feather {
+                    assert!(
+                        p[0] >= low[0] && p[0] <= high[0] && p[1] >= low[1] && p[1] <= high[1],
+                        "{face:?}: {p:?} within the fade lies outside {low:?}..{high:?}"
+                    );
+                }
+            }
+        }
+    }
 }
 
 #[test]

@@ -164,9 +164,11 @@ def test_key_colour_spreads_a_light_evenly_with_its_colour_and_power():
     assert np.allclose(spread, spread[:, :, :1, :1])
 
 
-def test_key_colour_reads_warmth_over_the_face_middle_only():
+def test_key_colour_reads_warmth_where_the_element_reads_the_face():
+    crop = {"side": 2.9, "lift": 0.22}
     image = np.full((3, 96, 96), 0.5, np.float32)
-    assert key_colour.warmth(image) == pytest.approx(0.0)
-    image[0, 34:62, 37:59] = 0.8  # warmer over the face's middle
+    assert key_colour.warmth(image, crop) == pytest.approx(0.0)
+    rows, columns = colour_tracking.face_region(96, crop)
+    image[0, rows, columns] = 0.8  # warmer over the face's middle
     image[2, :10, :] = 1.0  # bluer far from the face
-    assert key_colour.warmth(image) > 0.3
+    assert key_colour.warmth(image, crop) == pytest.approx(np.log(0.82 / 0.52))

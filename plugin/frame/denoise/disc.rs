@@ -1,6 +1,9 @@
-//! Where the denoising shows: the disc round the face that the lighting change
+//! Where the denoising shows: the disc round the head that the lighting change
 //! covers, whole through its inner circle and part of its fade, then fading
-//! out, at the face's strength; and the runs of a row it reaches.
+//! out, at the face's strength; and the runs of a row it reaches. The change
+//! also runs down the shoulders; they are not denoised, since the face is
+//! where the camera's noise, multiplied by the change, shows (a body's
+//! clothes and the room beside it take the change with their noise as filmed).
 
 use super::super::Crop;
 use super::super::gain_field::INNER_RADIUS;

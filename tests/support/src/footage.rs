@@ -212,7 +212,7 @@ pub struct Relit {
     /// where the meta came without them, [`Region::face_within`] the square).
     pub face: Region,
     /// How much of the change showed, in [0, 1] (less while a face fades in
-    /// or out), and the width of its fade beyond the square's inner circle,
+    /// or out), and the width of its fade beyond the head and shoulders,
     /// in pixels. None where the meta came without its parameters:
     /// `videoconvert` copies the region but not them.
     pub shown: Option<(f32, usize)>,
