@@ -576,6 +576,25 @@ fn gained(
     (before, after)
 }
 
+/// ln(after / before) of pixel (`x`, `y`)'s green byte in two RGB frames `w` wide.
+fn green_log_ratio(before: &[u8], after: &[u8], w: usize, x: usize, y: usize) -> f32 {
+    let i = (y * w + x) * 3 + 1;
+    (after[i] as f32 / before[i] as f32).ln()
+}
+
+/// The largest step of `ratio` between neighbouring pixels, across or down.
+fn steepest_step((w, h): (usize, usize), ratio: impl Fn(usize, usize) -> f32) -> f32 {
+    let mut steepest = 0f32;
+    for y in 1..h {
+        for x in 1..w {
+            steepest = steepest
+                .max((ratio(x, y) - ratio(x - 1, y)).abs())
+                .max((ratio(x, y) - ratio(x, y - 1)).abs());
+        }
+    }
+    steepest
+}
+
 #[test]
 fn the_change_fades_out_smoothly_beyond_the_crop() {
     let (w, h) = (240, 160);
@@ -586,10 +605,7 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
     };
     let feather = 60;
     let (before, after) = gained((w, h), |_, _| [100; 3], crop, feather, |_, _| 1.5);
-    let ratio = |x: usize, y: usize| {
-        let i = (y * w + x) * 3 + 1;
-        (after[i] as f32 / before[i] as f32).ln()
-    };
+    let ratio = |x: usize, y: usize| green_log_ratio(&before, &after, w, x, y);
     // Whole at the centre: the network's gain (with its ε of 0.02) on the
     // frame's value plus two levels, dithered by less than half a level.
     let i = 100.0 / 255.0;
@@ -624,14 +640,7 @@ fn the_change_fades_out_smoothly_beyond_the_crop() {
     // No step anywhere: a smoothstep of ln 1.5 over the feather rises at most
     // 1.5 · ln 1.5 / feather a pixel (0.015), and dither and rounding move
     // each pixel by up to a level (0.01) either way. A box would step by 0.4.
-    let mut steepest = 0f32;
-    for y in 1..h {
-        for x in 1..w {
-            steepest = steepest
-                .max((ratio(x, y) - ratio(x - 1, y)).abs())
-                .max((ratio(x, y) - ratio(x, y - 1)).abs());
-        }
-    }
+    let steepest = steepest_step((w, h), ratio);
     assert!(steepest < 0.036, "steepest step {steepest}");
 }
 
@@ -649,10 +658,7 @@ fn the_change_runs_down_the_shoulders_and_not_beside_them() {
     };
     let feather = 60;
     let (before, after) = gained((w, h), |_, _| [100; 3], crop, feather, |_, _| 1.5);
-    let ratio = |x: usize, y: usize| {
-        let i = (y * w + x) * 3 + 1;
-        (after[i] as f32 / before[i] as f32).ln()
-    };
+    let ratio = |x: usize, y: usize| green_log_ratio(&before, &after, w, x, y);
     let whole = ratio(240, 60);
     assert!(whole > 0.3, "at the face: {whole}");
     // 200 pixels below the crop, 11 face heights below the face, where a
@@ -666,20 +672,12 @@ fn the_change_runs_down_the_shoulders_and_not_beside_them() {
     for x in (0..140).chain(341..w) {
         assert_eq!(ratio(x, 300), 0.0, "({x}, 300)");
     }
-    let mut steepest = 0f32;
-    for y in 1..h {
-        for x in 1..w {
-            steepest = steepest
-                .max((ratio(x, y) - ratio(x - 1, y)).abs())
-                .max((ratio(x, y) - ratio(x, y - 1)).abs());
-        }
-    }
+    let steepest = steepest_step((w, h), ratio);
     assert!(steepest < 0.036, "steepest step {steepest}");
     // With a narrow fade, the neck between chin and shoulders is whole too:
     // head and body are one shape, not two with a gap between.
     let (before, after) = gained((w, h), |_, _| [100; 3], crop, 6, |_, _| 1.5);
-    let i = (79 * w + 240) * 3 + 1;
-    let neck = (after[i] as f32 / before[i] as f32).ln();
+    let neck = green_log_ratio(&before, &after, w, 240, 79);
     assert!(
         (neck - whole).abs() < 0.02,
         "at the neck: {neck} against {whole}"
