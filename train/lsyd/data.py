@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from . import contract, pairing
 
@@ -113,6 +114,34 @@ class PairSet:
         counts = (rehearsed.sum(), (~rehearsed).sum())
         weights = torch.where(rehearsed, rehearsal_share / counts[0], (1.0 - rehearsal_share) / counts[1])
         return torch.multinomial(weights.double(), n, replacement=True, generator=generator)
+
+
+def jitter_crops(
+    batch: tuple[torch.Tensor, ...], jitter: float, generator: torch.Generator
+) -> tuple[torch.Tensor, ...]:
+    """A batch of (source, source light, target, target light) with each pair's two images
+    zoomed about the face by a factor in [1 - jitter, 1 + jitter] and shifted by up to
+    ``jitter / 2`` face heights each way, the same for both (they show one pose), the
+    picture's edge continued where the view reaches past it.
+
+    The captures' crops follow the simulator's exact face; a real detector's box is a few
+    percent larger or smaller and off centre, and without such pairs the light decoder's
+    guess on a real face swung with a few percent of the box's size."""
+    src, l_src, tgt, l_tgt = batch
+    n = src.shape[0]
+    draw = lambda: 2.0 * torch.rand(n, generator=generator) - 1.0  # noqa: E731
+    zoom = 1.0 + jitter * draw()
+    face_height = 2.0 / contract.CROP["side"]  # in the [-1, 1] coordinates of affine_grid
+    centre_y = 2.0 * contract.CROP["lift"] / contract.CROP["side"]  # the face's centre, below the crop's
+    shift = 0.5 * jitter * face_height * torch.stack([draw(), draw()], dim=1)
+    # Output point p samples the input at centre + (p - centre) / zoom + shift.
+    theta = torch.zeros(n, 2, 3)
+    theta[:, 0, 0] = theta[:, 1, 1] = 1.0 / zoom
+    theta[:, 0, 2] = shift[:, 0]
+    theta[:, 1, 2] = shift[:, 1] + centre_y * (1.0 - 1.0 / zoom)
+    grid = F.affine_grid(theta, list(src.shape), align_corners=False)
+    warp = lambda x: F.grid_sample(x, grid, mode="bilinear", padding_mode="border", align_corners=False)  # noqa: E731
+    return warp(src), l_src, warp(tgt), l_tgt
 
 
 def resize_frames(frames: np.ndarray, resolution: int) -> np.ndarray:

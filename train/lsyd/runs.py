@@ -92,6 +92,11 @@ class TrainConfig:
     # The share of the batches' pairs drawn from rehearsal sessions (``data.REHEARSAL_PREFIX``)
     # whatever their number of pairs; None: every pair alike.
     rehearsal_share: float | None = None
+    # How far the face detector's box may err, as a fraction of the face's height: each pair
+    # is zoomed by up to this much and shifted by up to half of it, the same for its source
+    # and target (``data.jitter_crops``), so the network meets faces a little larger,
+    # smaller or off their place in the crop, as a real detector's box puts them. 0: none.
+    box_jitter: float = 0.0
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -110,6 +115,7 @@ class TrainConfig:
             init=d.get("init"),
             weight_average=d.get("weight_average", 0.0),
             rehearsal_share=d.get("rehearsal_share"),
+            box_jitter=d.get("box_jitter", 0.0),
         )
 
 

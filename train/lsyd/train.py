@@ -247,7 +247,10 @@ def train(
         try:
             while trainer.step < end:
                 idx = pairs.draw(cfg.batch, cfg.rehearsal_share, trainer.sampler)
-                terms = trainer.train_step(pairs.batch(idx))
+                batch = pairs.batch(idx)
+                if cfg.box_jitter:
+                    batch = data.jitter_crops(batch, cfg.box_jitter, trainer.sampler)
+                terms = trainer.train_step(batch)
                 bar.update(1)
                 if trainer.step % 20 == 0 or trainer.step == cfg.steps:
                     bar.set_postfix(l1=f"{terms['l1']:.4f}", g=f"{terms['g']:.3f}")
@@ -367,6 +370,12 @@ def main() -> None:
         default=None,
         help="draw the pairs of sessions named rehearsal-* for this share of each batch (default: as any pair)",
     )
+    p.add_argument(
+        "--box-jitter",
+        type=float,
+        default=TrainConfig.box_jitter,
+        help="not in the paper: zoom each pair by up to this fraction, and shift it by half as many face heights",
+    )
     p.add_argument("--pairs", default="keypoints", choices=["keypoints", "exact", "both"])
     p.add_argument("--max-keypoint-distance", type=float, default=pairing.PairingRule.max_keypoint_distance)
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
@@ -408,6 +417,7 @@ def main() -> None:
         init=str(a.init.resolve()) if a.init else None,
         weight_average=a.weight_average,
         rehearsal_share=a.rehearsal_share,
+        box_jitter=a.box_jitter,
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
     train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)

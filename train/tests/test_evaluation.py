@@ -10,7 +10,7 @@ import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
-from lsyd.evaluation import colour_tracking, direction, evaluate, key_colour
+from lsyd.evaluation import colour_tracking, direction, evaluate, key_colour, real_direction
 
 COMMANDS = (
     "evaluate",
@@ -172,3 +172,12 @@ def test_key_colour_reads_warmth_where_the_element_reads_the_face():
     image[0, rows, columns] = 0.8  # warmer over the face's middle
     image[2, :10, :] = 1.0  # bluer far from the face
     assert key_colour.warmth(image, crop) == pytest.approx(np.log(0.82 / 0.52))
+
+
+def test_the_box_scales_about_its_centre():
+    box = [100.0, 40.0, 200.0, 160.0]
+    for scale in real_direction.BOX_SCALES:
+        x0, y0, x1, y1 = real_direction.scaled(box, scale)
+        assert (x0 + x1) / 2 == pytest.approx(150.0) and (y0 + y1) / 2 == pytest.approx(100.0)
+        assert (x1 - x0, y1 - y0) == (pytest.approx(100.0 * scale), pytest.approx(120.0 * scale))
+    assert 1.0 in real_direction.BOX_SCALES, "the detector's own box is one of the sizes"
