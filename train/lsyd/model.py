@@ -122,9 +122,16 @@ class ConfidenceLight(nn.Module):
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         h = act(self.hidden(x))
         light = torch.sigmoid(self.light(h))  # (B, 3*16*32, H, W), linear light in [0, 1]
-        conf = F.softmax(self.confidence(h).flatten(2), dim=2)  # (B, 1, H*W), positive, sums to 1
-        fused = (light.flatten(2) * conf).sum(dim=2)
+        fused = (light.flatten(2) * self.weights(h)).sum(dim=2)
         return fused.view(-1, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
+
+    def weights(self, h: torch.Tensor) -> torch.Tensor:
+        """(B, 1, H*W): each location's share of the fused light, positive, summing to 1."""
+        return F.softmax(self.confidence(h).flatten(2), dim=2)
+
+    def confidence_map(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, H, W): where in the picture the fused light is read, as ``forward`` weighs it."""
+        return self.weights(act(self.hidden(x))).view(x.shape[0], *x.shape[-2:])
 
 
 class LightDecoder(nn.Module):
@@ -143,6 +150,10 @@ class LightDecoder(nn.Module):
 
     def forward(self, e2: torch.Tensor, e4: torch.Tensor, e6: torch.Tensor) -> torch.Tensor:
         return self.fuse(self.pool(e2, e4, e6))
+
+    def confidence_map(self, e2: torch.Tensor, e4: torch.Tensor, e6: torch.Tensor) -> torch.Tensor:
+        """(B, H, W) at the bottleneck's size: where in the crop the light is read."""
+        return self.fuse.confidence_map(self.pool(e2, e4, e6))
 
 
 class LightField(nn.Module):

@@ -115,3 +115,24 @@ def test_a_light_field_grown_onto_a_trained_network_starts_as_it_was_and_sides_t
         assert "width" in str(e)
     else:
         raise AssertionError("a network of another width was grown")
+
+
+def test_the_confidence_map_is_where_the_predicted_light_is_read():
+    """``confidence_map`` weighs each location of the light decoder's input as the prediction
+    does: the predicted light is the map's weighted mean of the per-location lights, so a map
+    that reads off the crop's edge says the light is taken from there and not from the face."""
+    from lsyd import model
+
+    torch.manual_seed(0)
+    net = model.build(model.NetConfig(resolution=64, width=0.125)).eval()
+    with torch.no_grad():
+        _, feats = net.encode(torch.rand(2, 3, 64, 64))
+        pooled = net.light_decoder.pool(feats[1], feats[3], feats[5])
+        weights = net.light_decoder.confidence_map(feats[1], feats[3], feats[5])
+        fuse = net.light_decoder.fuse
+        per_location = torch.sigmoid(fuse.light(model.act(fuse.hidden(pooled))))
+        by_map = (per_location * weights[:, None]).sum(dim=(2, 3)).view(2, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
+        predicted = net.predict_light(feats)
+    assert weights.shape == (2, *pooled.shape[-2:])
+    assert torch.allclose(weights.sum(dim=(1, 2)), torch.ones(2))
+    assert torch.allclose(by_map, predicted, atol=1e-6)

@@ -20,7 +20,8 @@ half; key swap, the warm key's asymmetry less the cool key's. Medians over the f
 A second table repeats the measure with the detector's box scaled about its centre by 0.94-1.06
 (``BOX_SCALES``), beside the light the network predicts the face is lit by (the mean of its
 predicted screen): without a monitor stream the element relights from that guess, so a guess that
-swings within a detector's error makes a face's relighting strong or weak by chance.
+swings within a detector's error makes a face's relighting strong or weak by chance. A third says
+where in the crop the light decoder reads that light (``where_light_is_read``).
 """
 
 from __future__ import annotations
@@ -203,6 +204,30 @@ def source_by_box(model: Path, frames: list[np.ndarray], detector: Detector) -> 
     return out
 
 
+def where_light_is_read(net, images: list[np.ndarray]) -> dict[str, float]:
+    """The light decoder's confidence (its weight in the fused light) over crops in [0, 1],
+    averaged over them: the share on the crop's bottom row of its map (at 96 px a band 16 px
+    high, under the chin: shoulders, collar, shirt) and on the map's central 4 x 4 cells,
+    round the face."""
+    maps = []
+    for image in images:
+        with torch.no_grad():
+            _, feats = net.encode(torch.from_numpy(np.ascontiguousarray(image.transpose(2, 0, 1)))[None].float())
+            maps.append(net.light_decoder.confidence_map(feats[1], feats[3], feats[5])[0].numpy())
+    mean = np.mean(maps, axis=0)
+    return {"bottom_row": float(mean[-1].sum()), "centre": float(mean[1:-1, 1:-1].sum())}
+
+
+def simulated_strangers(sessions: Path, resolution: int) -> list[np.ndarray]:
+    """Every 50th frame of each unseen person's desk session, at network resolution."""
+    frames = []
+    for session in sorted(sessions.glob("person-*")):
+        face = np.load(session / "face.npy", mmap_mode="r")
+        every_50th = np.asarray(face[::50], dtype=np.float32) / 255.0
+        frames.extend(area_resize(every_50th, resolution))
+    return frames
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--models", type=Path, nargs="+", default=[ROOT / "models" / "starter"])
@@ -251,6 +276,32 @@ def main() -> None:
                 for k, fmt in (("screen", "{:.3f}"), ("key_swap", "{:+.1f}"), ("strength", "{:.1f}"))
             ]
             lines.append(f"| {model.name} | {name} | " + " | ".join(cells) + " |")
+            print(lines[-1])
+    strangers = ROOT / "data" / "starter" / "unseen-captures"
+    lines += [
+        "",
+        "Where the light decoder reads the light: its confidence (weight in the predicted screen) "
+        "on the bottom row of its 6 x 6 map (shoulders, collar, shirt) and on the central 4 x 4 "
+        "cells, round the face (the rest is on its other edge cells); the portrait's crop as found, "
+        "the film clip's frames and, "
+        f"where `{strangers.relative_to(ROOT)}` holds them, every 50th frame of the unseen "
+        "simulated people's desk sessions.",
+        "",
+        "| model | crops | bottom row | central 4 x 4 |",
+        "|---|---|---|---|",
+    ]
+    for model in a.models:
+        net, cfg = runs.load_saved_network(model / "network.pt")
+        rule = contract.read(model / "model.json")["crop"]
+        crops = {
+            name: [crop(f, b, rule, cfg.resolution)[0] for f in frames if (b := detector.box(f)) is not None]
+            for name, frames in clips.items()
+        }
+        if strangers.exists():
+            crops["simulated strangers"] = simulated_strangers(strangers, cfg.resolution)
+        for name, images in crops.items():
+            read = where_light_is_read(net, images)
+            lines.append(f"| {model.name} | {name} | {read['bottom_row']:.2f} | {read['centre']:.2f} |")
             print(lines[-1])
     a.out.parent.mkdir(parents=True, exist_ok=True)
     a.out.write_text("\n".join(lines) + "\n")
