@@ -181,3 +181,26 @@ def test_the_box_scales_about_its_centre():
         assert (x0 + x1) / 2 == pytest.approx(150.0) and (y0 + y1) / 2 == pytest.approx(100.0)
         assert (x1 - x0, y1 - y0) == (pytest.approx(100.0 * scale), pytest.approx(120.0 * scale))
     assert 1.0 in real_direction.BOX_SCALES, "the detector's own box is one of the sizes"
+
+
+def test_a_frame_without_a_face_leaves_the_other_frames_measure_alone():
+    """real_direction pairs each frame with its own box: a frame where no face is found drops
+    out, and the rest are measured as they would be alone."""
+
+    class Boxes:
+        def __init__(self, boxes):
+            self.boxes = boxes
+
+        def box(self, frame):
+            return self.boxes[int(frame[0, 0, 0])]
+
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (180, 320, 3), dtype=np.uint8) for _ in range(3)]
+    for k, frame in enumerate(frames):
+        frame[0, 0, 0] = k  # which box the stand-in detector gives it
+    boxes = Boxes([None, [120.0, 40.0, 180.0, 100.0], [60.0, 70.0, 110.0, 120.0]])
+    model = ROOT / "models" / "starter"
+    with_faceless = real_direction.measure(model, frames, boxes)
+    alone = real_direction.measure(model, frames[1:], boxes)
+    assert with_faceless[1.0]["frames"] == 2
+    assert with_faceless == alone

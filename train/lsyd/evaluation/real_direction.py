@@ -139,28 +139,6 @@ def shape(before: np.ndarray, after: np.ndarray, box: tuple[slice, slice]) -> tu
     return float(change[:, :half].mean() - change[:, -half:].mean()), float(np.sqrt((change**2).mean()))
 
 
-def measure(model: Path, frames: list[np.ndarray], detector: Detector) -> dict[str, float]:
-    net, cfg = runs.load_saved_network(model / "network.pt")
-    rule = contract.read(model / "model.json")["crop"]
-    swaps, strengths = [], []
-    for frame in frames:
-        found = detector.box(frame)
-        if found is None:
-            continue
-        image, box = crop(frame, found, rule, cfg.resolution)
-        tensor = torch.from_numpy(image.transpose(2, 0, 1).copy())[None]
-        shapes = []
-        for key in (side_key(WARM, left=True), side_key(COOL, left=False)):
-            with torch.no_grad():
-                relit, _ = net(tensor, None, key)
-            shapes.append(shape(image, relit[0].clamp(0, 1).numpy().transpose(1, 2, 0), box))
-        swaps.append(shapes[0][0] - shapes[1][0])
-        strengths.extend(s[1] for s in shapes)
-    if not swaps:
-        raise SystemExit(f"{model}: no face was found in any frame")
-    return {"frames": len(swaps), "key_swap": float(np.median(swaps)), "strength": float(np.median(strengths))}
-
-
 BOX_SCALES = (0.94, 0.97, 1.0, 1.03, 1.06)
 
 
@@ -171,35 +149,42 @@ def scaled(box: list[float], scale: float) -> list[float]:
     return [cx - hw, cy - hh, cx + hw, cy + hh]
 
 
-def source_by_box(model: Path, frames: list[np.ndarray], detector: Detector) -> dict[float, dict[str, float]]:
-    """Per scale of the detector's box in ``BOX_SCALES``: the median over the frames of the
-    predicted screen's mean (linear light in [0, 1]) and of the network's strength and key
-    swap. The element's tracker and this module's detector put the box a few percent apart,
-    as detectors do; a model whose guess of the present light swings within that relights
-    the same face strongly or hardly at all by chance."""
+def relit_by_keys(net, image: np.ndarray, face: tuple[slice, slice]) -> tuple[float, list[float], float]:
+    """One crop relit from its predicted light to the two side keys: the key swap, the two
+    strengths, and the mean of the predicted screen."""
+    tensor = torch.from_numpy(image.transpose(2, 0, 1).copy())[None]
+    shapes = []
+    for key in (side_key(WARM, left=True), side_key(COOL, left=False)):
+        with torch.no_grad():
+            relit, predicted = net(tensor, None, key)
+        shapes.append(shape(image, relit[0].clamp(0, 1).numpy().transpose(1, 2, 0), face))
+    return shapes[0][0] - shapes[1][0], [s[1] for s in shapes], float(predicted.mean())
+
+
+def measure(model: Path, frames: list[np.ndarray], detector: Detector) -> dict[float, dict[str, float]]:
+    """Per scale of the detector's box in ``BOX_SCALES`` (1: the box as found): over the frames
+    with a face, the median of the network's key swap, of its strength and of the predicted
+    screen's mean (linear light in [0, 1]). The element's tracker and this module's detector put
+    the box a few percent apart, as detectors do; a model whose guess of the present light
+    swings within that relights the same face strongly or hardly at all by chance."""
     net, cfg = runs.load_saved_network(model / "network.pt")
     rule = contract.read(model / "model.json")["crop"]
-    found = [b for b in map(detector.box, frames) if b is not None]
-    if not found:
+    faces = [(frame, box) for frame in frames if (box := detector.box(frame)) is not None]
+    if not faces:
         raise SystemExit(f"{model}: no face was found in any frame")
     out = {}
     for scale in BOX_SCALES:
-        means, swaps, strengths = [], [], []
-        for frame, box in zip(frames, found, strict=False):
-            image, face = crop(frame, scaled(box, scale), rule, cfg.resolution)
-            tensor = torch.from_numpy(image.transpose(2, 0, 1).copy())[None]
-            shapes = []
-            for key in (side_key(WARM, left=True), side_key(COOL, left=False)):
-                with torch.no_grad():
-                    relit, predicted = net(tensor, None, key)
-                shapes.append(shape(image, relit[0].clamp(0, 1).numpy().transpose(1, 2, 0), face))
-            means.append(float(predicted.mean()))
-            swaps.append(shapes[0][0] - shapes[1][0])
-            strengths.extend(s[1] for s in shapes)
+        swaps, strengths, screens = [], [], []
+        for frame, box in faces:
+            swap, two, screen = relit_by_keys(net, *crop(frame, scaled(box, scale), rule, cfg.resolution))
+            swaps.append(swap)
+            strengths.extend(two)
+            screens.append(screen)
         out[scale] = {
-            "screen": float(np.median(means)),
+            "frames": len(faces),
             "key_swap": float(np.median(swaps)),
             "strength": float(np.median(strengths)),
+            "screen": float(np.median(screens)),
         }
     return out
 
@@ -252,11 +237,11 @@ def main() -> None:
         "| its median strength % (counts the blur of its output as change) |",
         "|---|---|---|---|---|",
     ]
-    for model in a.models:
-        for name, frames in clips.items():
-            m = measure(model, frames, detector)
-            lines.append(f"| {model.name} | {name} | {m['frames']} | {m['key_swap']:+.1f} | {m['strength']:.1f} |")
-            print(lines[-1])
+    measured = {(model, name): measure(model, frames, detector) for model in a.models for name, frames in clips.items()}
+    for (model, name), by_box in measured.items():
+        m = by_box[1.0]
+        lines.append(f"| {model.name} | {name} | {m['frames']} | {m['key_swap']:+.1f} | {m['strength']:.1f} |")
+        print(lines[-1])
     scales = " / ".join(f"x{s:g}" for s in BOX_SCALES)
     lines += [
         "",
@@ -268,15 +253,13 @@ def main() -> None:
         "| model | clip | predicted screen | key swap % | strength % |",
         "|---|---|---|---|---|",
     ]
-    for model in a.models:
-        for name, frames in clips.items():
-            by_box = source_by_box(model, frames, detector).values()
-            cells = [
-                " / ".join(fmt.format(m[k]) for m in by_box)
-                for k, fmt in (("screen", "{:.3f}"), ("key_swap", "{:+.1f}"), ("strength", "{:.1f}"))
-            ]
-            lines.append(f"| {model.name} | {name} | " + " | ".join(cells) + " |")
-            print(lines[-1])
+    for (model, name), by_box in measured.items():
+        cells = [
+            " / ".join(fmt.format(m[k]) for m in by_box.values())
+            for k, fmt in (("screen", "{:.3f}"), ("key_swap", "{:+.1f}"), ("strength", "{:.1f}"))
+        ]
+        lines.append(f"| {model.name} | {name} | " + " | ".join(cells) + " |")
+        print(lines[-1])
     strangers = ROOT / "data" / "starter" / "unseen-captures"
     lines += [
         "",
