@@ -124,9 +124,9 @@ def jitter_crops(
     ``jitter / 2`` face heights each way, the same for both (they show one pose), the
     picture's edge continued where the view reaches past it.
 
-    The captures' crops follow the simulator's exact face; a real detector's box is a few
-    percent larger or smaller and off centre, and without such pairs the light decoder's
-    guess on a real face swung with a few percent of the box's size."""
+    A real detector's box is a few percent larger or smaller than the crop rule assumes, and
+    off centre. Tried on the starter to steady the light decoder's guess on a real face, which
+    swings with a few percent of the box's size: it did not (docs/training.md, "Box jitter")."""
     src, l_src, tgt, l_tgt = batch
     n = src.shape[0]
     draw = lambda: 2.0 * torch.rand(n, generator=generator) - 1.0  # noqa: E731

@@ -92,9 +92,9 @@ class TrainConfig:
     # The share of the batches' pairs drawn from rehearsal sessions (``data.REHEARSAL_PREFIX``)
     # whatever their number of pairs; None: every pair alike.
     rehearsal_share: float | None = None
-    # How far the face detector's box may err, as a fraction of the face's height: each pair
-    # is zoomed by up to this much and shifted by up to half of it, the same for its source
-    # and target (``data.jitter_crops``), so the network meets faces a little larger,
+    # How far the face detector's box may err: each pair is zoomed about the face by a factor
+    # within 1 +- this and shifted by up to half of it in face heights, the same for its
+    # source and target (``data.jitter_crops``), so the network meets faces a little larger,
     # smaller or off their place in the crop, as a real detector's box puts them. 0: none.
     box_jitter: float = 0.0
 
