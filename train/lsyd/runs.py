@@ -72,6 +72,18 @@ def share(text: str) -> float:
     return value
 
 
+def jitter(text: str) -> float:
+    """A command line's box jitter (``--box-jitter``): from 0 to 0.5; a zoom of 1 - 0.5 or less
+    would show the picture's edge continued over most of the crop."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number; give a jitter from 0 to 0.5") from None
+    if not 0.0 <= value < 0.5:
+        raise argparse.ArgumentTypeError(f"{value:g} is out of range; give a number from 0 to under 0.5 (0.1: 10%)")
+    return value
+
+
 @dataclasses.dataclass(frozen=True)
 class TrainConfig:
     """How a run trains: the network, the schedule, the pairs and the loss weights."""

@@ -30,7 +30,7 @@ from torch.optim.swa_utils import AveragedModel, get_ema_multi_avg_fn
 from tqdm import tqdm
 
 from . import data, losses, model, pairing
-from .runs import LossWeights, TrainConfig, hardware, initial_weights, read_config, read_network, share
+from .runs import LossWeights, TrainConfig, hardware, initial_weights, jitter, read_config, read_network, share
 
 
 def load_pairs(cfg: TrainConfig, root: Path) -> tuple[data.PairSet, list[dict]]:
@@ -372,7 +372,7 @@ def main() -> None:
     )
     p.add_argument(
         "--box-jitter",
-        type=float,
+        type=jitter,
         default=TrainConfig.box_jitter,
         help="not in the paper: zoom each pair by up to this fraction, and shift it by half as many face heights",
     )

@@ -54,3 +54,18 @@ def test_the_face_is_zoomed_and_shifted_within_the_jitter():
 def test_no_jitter_leaves_the_crops_as_they_are():
     faces = face_disc(4)
     assert torch.allclose(data.jitter_crops((faces, None, faces, None), 0.0, torch.Generator())[0], faces, atol=1e-5)
+
+
+def test_a_box_jitter_out_of_range_is_refused_naming_the_range():
+    import subprocess
+    import sys
+
+    for bad in ("-0.1", "0.5", "lots"):
+        run = subprocess.run(
+            [sys.executable, "-m", "lsyd.train", "--out", "unused", "--box-jitter", bad],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        assert run.returncode == 2, run.stderr
+        assert "--box-jitter" in run.stderr and "0.5" in run.stderr, run.stderr
