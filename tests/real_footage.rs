@@ -17,8 +17,8 @@ use lsydrelight_testkit::{
     checkout,
     direction::{LightShape, light_shape},
     footage::{
-        Format, Relit, decode, denoised, portrait_720p, read_y4m, relight, relight_with,
-        small_portrait_1080p, through,
+        Format, Relit, decode, denoised, portrait_720p, portrait_720p_leaning, read_y4m, relight,
+        relight_with, small_portrait_1080p, through,
     },
     init,
     quality::{Region, View, box_edges, mean_level, mottling, pumping},
@@ -118,7 +118,7 @@ fn a_real_portrait_is_relit_without_a_box_or_blotches() {
     let m = measure(&decode(&path, 12).unwrap(), sunset(), Format::Rgb);
     let last = m.last().unwrap();
     // `cargo run --release --example benchmark -- --quality` over 90 frames:
-    // 3.1% (10.4% in all) and 0.59%.
+    // 3.6% (11.3% in all) and 0.83%.
     assert!(
         last.unexplained_box_edge < 10.0,
         "box edge {:.1}% where the picture has none ({:.1}% in all)",
@@ -126,9 +126,9 @@ fn a_real_portrait_is_relit_without_a_box_or_blotches() {
         last.box_edge
     );
     assert!(last.mottling < 2.0, "mottling {:.2}%", last.mottling);
-    // Over the face alone, the definition: 0.41% over 90 frames
-    // (1.70% counting the suit's near-black collar, whose 8-bit rounding
-    // the measure leaves out: `quality::MOTTLING_BLACK`).
+    // Over the face alone, the definition: 1.15% over 90 frames
+    // (1.43% counting the near-black pixels, whose 8-bit rounding the
+    // measure leaves out: `quality::MOTTLING_BLACK`).
     assert!(
         last.face_mottling < 2.0,
         "mottling over the face {:.2}%",
@@ -147,7 +147,7 @@ fn a_film_clip_is_relit_without_a_box_or_pumping() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let mottled = median(m.iter().map(|m| m.mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 6.0% (15.1% in all), 2.21% and 0.95 levels over 90 frames
+    // 6.0% (13.8% in all), 2.21% and 0.92 levels over 90 frames
     // (`benchmark --quality`). Over the whole relit square the mottling is
     // mostly the dark clip's hair and room just above black, so its bar is
     // looser than the face's.
@@ -157,7 +157,7 @@ fn a_film_clip_is_relit_without_a_box_or_pumping() {
     );
     assert!(pumped < 1.0, "pumping {pumped:.2} levels");
     assert!(mottled < 3.0, "mottling {mottled:.2}%");
-    // Over the face alone, the bar: 1.03% over 90 frames (1.82% in all).
+    // Over the face alone, the bar: 1.02% over 90 frames (1.73% in all).
     let face_mottled = median(m.iter().map(|m| m.face_mottling));
     assert!(
         face_mottled < 2.0,
@@ -173,7 +173,7 @@ fn a_real_portrait_in_i420_takes_the_change_each_pixel_would_in_rgb() {
     };
     let m = measure(&decode(&path, 12).unwrap(), sunset(), Format::I420);
     let last = m.last().unwrap();
-    // 3.1% (9.4% in all), 0.78% and over the face 0.68% over 90 frames
+    // 3.7% (10.4% in all), 0.80% and over the face 0.92% over 90 frames
     // (`benchmark --quality`, read as I420 carries them).
     assert!(
         last.unexplained_box_edge < 10.0,
@@ -200,13 +200,13 @@ fn a_film_clip_in_i420_is_relit_as_in_rgb() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let face_mottled = median(m.iter().map(|m| m.face_mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 8.1% (16.6% in all), 3.84% and 0.98 levels over 90 frames (0.76 while
+    // 8.0% (16.4% in all), 3.72% and 0.90 levels over 90 frames (0.76 while
     // only the head was relit: the shoulders' change now breathes with the
     // face's, within the relit square). Read through 8-bit RGB, the
     // box edge was 28.8%: the clipping of near-black pixels that share a
     // chroma sample with brighter ones. Over the face, mottling is the
     // rounding of chroma on this dark clip's dark pixels, one chroma sample
-    // for four pixels (6.14% counting those under 16 levels too); this bound
+    // for four pixels (5.67% counting those under 16 levels too); this bound
     // holds the measured figure.
     assert!(
         unexplained < 10.0,
@@ -245,11 +245,13 @@ fn a_person_walking_about_the_simulated_room_is_relit_without_a_box() {
 fn a_real_portrait_relit_to_neon_changes_visibly() {
     // A relighting must show. The astronaut's face, framed as a 720p webcam
     // would (her hair near the top edge), relit to `neon` by the starter
-    // model: 3.0% (RMS of the change over the face, `examples/target_lights
+    // model: 15.4% (RMS of the change over the face, `examples/target_lights
     // direction`) with the default source, which adds the target's light to
-    // the studio light already on her face; 13.1% with `source-preset=
-    // soft-front`, which replaces a frontal light. (Until the element said
-    // where the face is in a square moved down into the frame, the face was
+    // the light the starter guesses is on her face; 14.8% with `source-preset=
+    // soft-front`, which replaces a frontal light. While her box came from the
+    // whole frame, coarse (`face::search`), the starter guessed a bright
+    // screen and the default source gave 3.0%. (Until the element said where
+    // the face is in a square moved down into the frame, the face was
     // measured 0.67 face heights too low, over chin, neck and collar: 12.3%
     // there.) A saturated two-sided light lights the face's sides
     // differently, but not by more than it lights the face.
@@ -260,7 +262,7 @@ fn a_real_portrait_relit_to_neon_changes_visibly() {
     let folder = path.parent().expect("the media folder");
     let frames = vec![portrait_720p(folder).unwrap(); 8];
     let (_, added) = relit_to(&frames, "neon", "");
-    assert!(added.strength > 2.5, "{added:?}");
+    assert!(added.strength > 8.0, "{added:?}");
     assert!(added.asymmetry.abs() < added.strength, "{added:?}");
     let (_, replaced) = relit_to(&frames, "neon", "source-preset=soft-front");
     assert!(replaced.strength > 6.0, "{replaced:?}");
@@ -270,12 +272,12 @@ fn a_real_portrait_relit_to_neon_changes_visibly() {
 #[test]
 fn a_key_from_the_left_and_one_from_the_right_light_a_real_face_differently() {
     // `warm-key-left` stands on the person's left, the image's right; the
-    // simulator's exact truth brightens the image-right half by 26.1% more
-    // under it than under `cool-key-right` (key swap -26.1,
+    // simulator's exact truth brightens the image-right half by 25.6% more
+    // under it than under `cool-key-right` (key swap -25.6,
     // `examples/target_lights direction`). The element draws the side with
-    // that sign on real faces: -5.5 on the portrait and -10.5 on the film clip
+    // that sign on real faces: -8.3 on the portrait and -10.5 on the film clip
     // (median over 30 frames; the still portrait reads the same over this
-    // test's 8, the film clip -7.2 over its 12); the release before
+    // test's 8, the film clip -7.6 over its 12); the release before
     // 2026-12-06, whose starter was trained on lights within a monitor's
     // width only, drew -0.8 and -4.9, and the starter of dfd58a9, whose last
     // stage left the dome's side lights out, -4.5 on the portrait.
@@ -292,6 +294,65 @@ fn a_key_from_the_left_and_one_from_the_right_light_a_real_face_differently() {
         eprintln!("{name}: key swap {swap:+.1}");
         assert!(swap < bar, "{name}: key swap {swap:+.1}, bar {bar}");
     }
+}
+
+#[test]
+fn a_real_face_leaning_in_and_out_keeps_its_light() {
+    // A webcam user leans towards the camera and back. The light the element
+    // relights from is read off the network's crop, which the face's box
+    // sets; in the whole 720p frame the portrait's box switched between about
+    // 186 and 137 px as she leaned by 6%, and over these frames the mean
+    // change over her face under `warm-key-left` went from -14.2% to +5.9%
+    // and back: a face breathing with the distance. Looked at closer
+    // (`face::search`), her box keeps its size, and the change +5.9% to +9.1%.
+    init();
+    let Some(path) = media("astronaut.png") else {
+        return;
+    };
+    let folder = path.parent().expect("the media folder");
+    let frames: Vec<RgbImage> = (0..75)
+        .map(|t| {
+            let lean = 1.0 + 0.06 * (std::f32::consts::TAU * t as f32 / 60.0).sin();
+            portrait_720p_leaning(folder, lean).unwrap()
+        })
+        .collect();
+    let model = gstlsydrelight::paths::default_model();
+    let relit = relight_with(
+        &frames,
+        &model,
+        "target-preset=warm-key-left target-transition=0",
+        Format::Rgb,
+    )
+    .unwrap();
+    let input = denoised(
+        &through(&frames, Format::Rgb).unwrap(),
+        &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
+    )
+    .unwrap();
+    // After the face's fade-in of 15 frames.
+    let means: Vec<f64> = relit
+        .iter()
+        .zip(&input)
+        .skip(15)
+        .map(|((output, shown), input)| {
+            let face = shown.expect("her face is followed").face;
+            light_shape(
+                &View::pixels(input.frame()),
+                &View::pixels(output.frame()),
+                face,
+            )
+            .mean
+        })
+        .collect();
+    let (lo, hi) = (
+        means.iter().copied().fold(f64::MAX, f64::min),
+        means.iter().copied().fold(f64::MIN, f64::max),
+    );
+    eprintln!("leaning: mean change over her face {lo:+.1}% to {hi:+.1}%");
+    assert!(
+        hi - lo < 5.0,
+        "her face's mean change spans {lo:+.1}% to {hi:+.1}%"
+    );
 }
 
 #[test]

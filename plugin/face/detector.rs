@@ -94,18 +94,28 @@ pub struct FaceDetector {
     session: Session,
     /// Anchor centres in fractions of the input, in the network's output order.
     anchors: Vec<[f32; 2]>,
-    /// A small face found by the last detection, looked for again round it.
+    /// A small face found by the last detection, looked for round where it was
+    /// when the whole frame shows none.
     last_small: Option<FaceBox>,
+    /// The last detection's face when it found one alone and small: the next
+    /// detections look only round it, and at the whole frame every
+    /// [`search::WHOLE_FRAME_EVERY`]-th time.
+    alone_small: Option<FaceBox>,
+    /// Detections since the whole frame was looked at.
+    since_whole_frame: u32,
     /// The tile of [`search::tiles`] the next scan starts at.
     next_tile: usize,
     /// What the last detection looked in, for the element's debug log.
     pub last_search: SearchStep,
 }
 
-/// Where one detection looked beyond the whole frame.
+/// Where one detection looked.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SearchStep {
-    /// Round the small face the detection before found.
+    /// At the whole frame's letterbox (not only round a small face alone in it).
+    pub whole_frame: bool,
+    /// Round a small face: the one the whole frame shows, or the one the
+    /// detection before found.
     pub near: bool,
     /// Tiles of the scan (none when a face was found without them).
     pub tiles: usize,
@@ -132,24 +142,48 @@ impl FaceDetector {
             session,
             anchors: anchors(),
             last_small: None,
+            alone_small: None,
+            since_whole_frame: 0,
             next_tile: 0,
             last_search: SearchStep::default(),
         })
     }
 
     /// The faces in `frame`, the whole frame's best score first, in the
-    /// frame's pixels. Faces too small for the whole frame are looked for as
-    /// [`search`] says: round a small face found before, and, when none is
-    /// found, in the next tiles of a scan.
+    /// frame's pixels. Faces too small for the whole frame are looked at as
+    /// [`search`] says: again round themselves (the closer look's box replaces
+    /// the whole frame's), round the small face found before when the whole
+    /// frame shows none, and, when no face is found, in the next tiles of a
+    /// scan. A small face found alone is looked for round itself only, but for
+    /// every [`search::WHOLE_FRAME_EVERY`]-th detection, which looks at the
+    /// whole frame again for faces that came in.
     pub fn detect(&mut self, frame: &Frame) -> Result<Vec<FaceBox>, EngineError> {
         let (w, h) = (frame.width, frame.height);
-        let mut faces = self.detect_in(frame, search::letterbox(w, h))?;
-        let mut step = SearchStep::default();
-        if let Some(small) = self.last_small {
-            step.near = true;
-            let near = self.detect_in(frame, search::around(&small, w, h))?;
-            add_new(&mut faces, near);
+        if let Some(alone) = self.alone_small
+            && self.since_whole_frame + 1 < search::WHOLE_FRAME_EVERY
+        {
+            let faces = self.detect_in(frame, search::around(&alone, w, h))?;
+            if !faces.is_empty() {
+                self.since_whole_frame += 1;
+                self.remember(&faces, w, h);
+                self.last_search = SearchStep {
+                    near: true,
+                    ..SearchStep::default()
+                };
+                return Ok(faces);
+            }
         }
+        self.since_whole_frame = 0;
+        let mut faces = self.detect_in(frame, search::letterbox(w, h))?;
+        let mut step = SearchStep {
+            whole_frame: true,
+            ..SearchStep::default()
+        };
+        let mut small = small_faces(&faces, w, h);
+        if small.is_empty() {
+            small.extend(self.last_small);
+        }
+        self.look_closer(frame, &small, &mut faces, &mut step)?;
         if faces.is_empty() {
             let tiles = search::tiles(w, h);
             while faces.is_empty() && step.tiles < search::TILES_PER_SEARCH.min(tiles.len()) {
@@ -158,10 +192,44 @@ impl FaceDetector {
                 step.tiles += 1;
                 faces = self.detect_in(frame, tile)?;
             }
+            // A face a tile shows is boxed as coarsely as in the whole frame.
+            let small = small_faces(&faces, w, h);
+            self.look_closer(frame, &small, &mut faces, &mut step)?;
         }
-        self.last_small = faces.iter().find(|f| search::is_small(f, w, h)).copied();
+        self.remember(&faces, w, h);
         self.last_search = step;
         Ok(faces)
+    }
+
+    /// What the next detection looks round: the largest small face, and the
+    /// face when it is small and alone.
+    fn remember(&mut self, faces: &[FaceBox], width: usize, height: usize) {
+        self.last_small = small_faces(faces, width, height).first().copied();
+        self.alone_small = match faces {
+            [face] => self.last_small.filter(|small| small == face),
+            _ => None,
+        };
+    }
+
+    /// Looks again round each of `small`, merging what it finds into `faces`:
+    /// round the closer look's box of the detection before where it is the
+    /// same face, so that a still face is looked at in the same square every
+    /// time and keeps its box.
+    fn look_closer(
+        &mut self,
+        frame: &Frame,
+        small: &[FaceBox],
+        faces: &mut Vec<FaceBox>,
+        step: &mut SearchStep,
+    ) -> Result<(), EngineError> {
+        for face in small {
+            step.near = true;
+            let finer = self.last_small.filter(|last| last.is_same_face(face));
+            let square = search::around(&finer.unwrap_or(*face), frame.width, frame.height);
+            let near = self.detect_in(frame, square)?;
+            replace_or_add(faces, near);
+        }
+        Ok(())
     }
 
     /// The faces in the whole frame's letterbox alone, as the detector found
@@ -209,11 +277,27 @@ impl FaceDetector {
     }
 }
 
-/// `found` appended to `faces`, leaving out those that overlap one already there.
-fn add_new(faces: &mut Vec<FaceBox>, found: Vec<FaceBox>) {
+/// The small faces among `faces`, the largest first, at most
+/// [`search::NEAR_LOOKS`] of them.
+fn small_faces(faces: &[FaceBox], width: usize, height: usize) -> Vec<FaceBox> {
+    let mut small: Vec<FaceBox> = faces
+        .iter()
+        .filter(|f| search::is_small(f, width, height))
+        .copied()
+        .collect();
+    small.sort_by(|a, b| b.height.total_cmp(&a.height));
+    small.truncate(search::NEAR_LOOKS);
+    small
+}
+
+/// The faces `found` by a closer look merged into `faces`: one that is the same
+/// face as one already there replaces it (the closer look's box is the finer),
+/// keeping its place in the order; the others are appended.
+fn replace_or_add(faces: &mut Vec<FaceBox>, found: Vec<FaceBox>) {
     for face in found {
-        if !faces.iter().any(|f| f.is_same_face(&face)) {
-            faces.push(face);
+        match faces.iter_mut().find(|f| f.is_same_face(&face)) {
+            Some(coarse) => *coarse = face,
+            None => faces.push(face),
         }
     }
 }
@@ -394,6 +478,47 @@ mod tests {
         assert!((faces[0].bounds[0] - x).abs() < 1e-6);
         assert!((faces[0].keypoints[3][0] - (x + 0.1)).abs() < 1e-6);
         assert_eq!(faces[1].bounds[0], 0.7);
+    }
+
+    fn face_box(cx: f32, height: f32) -> FaceBox {
+        FaceBox {
+            cx,
+            cy: 300.0,
+            width: height,
+            height,
+            score: 0.9,
+            keypoints: [[cx, 300.0]; 6],
+        }
+    }
+
+    #[test]
+    fn a_closer_look_replaces_the_coarse_box_in_its_place_and_adds_new_faces() {
+        let mut faces = vec![face_box(200.0, 180.0), face_box(900.0, 120.0)];
+        replace_or_add(
+            &mut faces,
+            vec![face_box(905.0, 100.0), face_box(1500.0, 60.0)],
+        );
+        assert_eq!(
+            faces,
+            vec![
+                face_box(200.0, 180.0),
+                face_box(905.0, 100.0),
+                face_box(1500.0, 60.0)
+            ]
+        );
+    }
+
+    #[test]
+    fn the_largest_small_faces_are_looked_at_again() {
+        // In a 1280 x 720 frame a face under 427 px (43 of 128 input px) is small.
+        let faces = [
+            face_box(100.0, 120.0),
+            face_box(400.0, 500.0),
+            face_box(700.0, 300.0),
+            face_box(1000.0, 200.0),
+        ];
+        let small = small_faces(&faces, 1280, 720);
+        assert_eq!(small, vec![face_box(700.0, 300.0), face_box(1000.0, 200.0)]);
     }
 
     #[test]

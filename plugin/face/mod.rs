@@ -126,9 +126,11 @@ pub fn face_place(wanted: Square, crop: Crop, rule: CropRule) -> FacePlace {
 /// field of view, at 256 × 256), so on a 640 × 360 frame the crop must be 360 px
 /// square and centred. `tests/face.rs::the_crop_rule_gives_the_training_framing`
 /// detects the face in 640 × 360 frames of 32 poses of the training sessions'
-/// motion and prints, per pose, frame height / face height (mean 2.92, sd 0.32)
-/// and (face centre − frame centre) / face height (mean 0.224, sd 0.137); it
-/// fails when these constants drift from the means.
+/// motion and prints, per pose, frame height / face height (mean 2.93, sd 0.33)
+/// and (face centre − frame centre) / face height (mean 0.203, sd 0.133; 2.92
+/// and 0.224 before the detector looked closer at small faces, which these
+/// are: [`search::SMALL_FACE_INPUT`]); it fails when these constants drift
+/// from the means.
 pub const CROP_SIDE: f32 = 2.9;
 /// How far the crop's centre is above the face box's centre, in face heights:
 /// the captures hold the face a little below the middle, the hair above it.

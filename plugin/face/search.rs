@@ -5,9 +5,12 @@
 //! small to find. So the detector looks again in smaller squares of the frame,
 //! each shrunk to the same 128 pixels:
 //!
-//! - round a small face it found before, a square of [`NEAR_SIDE`] face heights
-//!   (where that face is a quarter of the input, as BlazeFace's training faces
-//!   are), so that it keeps finding the face it follows;
+//! - round a small face, a square of [`NEAR_SIDE`] face heights, where the face
+//!   is a third of the input: round the one the whole frame shows, whose box
+//!   there is coarse, or, when the whole frame shows none, round the one found
+//!   before, so that it keeps finding the face it follows; a small face found
+//!   alone is looked for round itself only, and the whole frame looked at
+//!   again every [`WHOLE_FRAME_EVERY`] detections;
 //! - when it found no face at all, the next few squares of a fixed scan of
 //!   tiles ([`TILES_PER_SEARCH`] a detection): the frame's shorter side, its
 //!   half and its quarter. Each scale is for the faces the one above shows
@@ -21,11 +24,30 @@ use super::{FaceBox, Square};
 
 /// Side of the detector's input, pixels.
 const INPUT: f32 = super::detector::INPUT_SIZE as f32;
-/// Height, in input pixels, under which a face counts as small: it is found
-/// again round where it was as well as in the whole frame.
+/// Height, in input pixels, down to which the scan's tiles show every face.
 pub const MIN_FACE_INPUT: f32 = 24.0;
-/// Side of the square looked in round a small face, in face heights.
-pub const NEAR_SIDE: f32 = 4.0;
+/// Side of the square looked in round a small face, in face heights: there the
+/// face is a third of the input, 43 pixels high.
+pub const NEAR_SIDE: f32 = 3.0;
+/// Height, in the whole frame's input pixels, under which a face counts as
+/// small: shorter than in the square round it, where it is looked at again.
+/// In the whole frame such a face's box is coarse, and jumps as the face
+/// moves: the astronaut portrait in 720p is 19 input pixels high there, and
+/// leaning in and out by 6% her box switched between about 186 and 137 px
+/// high (scores 0.57 and 0.94); round her it keeps 142-145 px, scaled back
+/// (`tests/face.rs::a_face_leaning_in_and_out_keeps_its_box`). At this
+/// height the two looks show the face alike, so a face growing past it keeps
+/// its box.
+pub const SMALL_FACE_INPUT: f32 = INPUT / NEAR_SIDE;
+/// Small faces looked at again by one detection, the largest first: a call
+/// with two people in view has both boxed alike.
+pub const NEAR_LOOKS: usize = 2;
+/// A small face found alone is looked for round itself only, and the whole
+/// frame looked at again every this many detections (at the tracker's
+/// interval of 5 frames, every half second at 30 fps): a face that comes in
+/// waits that long to be seen, and the detector's time on a lone small face
+/// falls from two detections to four in three.
+pub const WHOLE_FRAME_EVERY: u32 = 3;
 /// Tiles looked in by one detection that found no face.
 pub const TILES_PER_SEARCH: usize = 2;
 /// Tile sides as fractions of the frame's shorter side, each half the one before.
@@ -45,15 +67,29 @@ pub fn letterbox(width: usize, height: usize) -> Square {
 
 /// Whether `face` is small in the whole frame's letterbox.
 pub fn is_small(face: &FaceBox, width: usize, height: usize) -> bool {
-    face.height * INPUT / letterbox(width, height).side < MIN_FACE_INPUT
+    face.height * INPUT / letterbox(width, height).side < SMALL_FACE_INPUT
 }
 
-/// The square looked in round a small face.
+/// Steps of the square looked in round a small face: its side an eighth of an
+/// octave apart (9%), its centre a sixteenth of its side. The detector's box of a
+/// still face differs by a pixel or so from one look to the next; on this grid
+/// the next look is made in the same square, finds the same box, and the
+/// network's crop stays put.
+const NEAR_SIDE_STEPS_PER_OCTAVE: f32 = 8.0;
+const NEAR_CENTRE_STEPS_PER_SIDE: f32 = 16.0;
+
+/// The square looked in round a small face, on the grid of
+/// [`NEAR_SIDE_STEPS_PER_OCTAVE`] and [`NEAR_CENTRE_STEPS_PER_SIDE`].
 pub fn around(face: &FaceBox, width: usize, height: usize) -> Square {
+    let octaves = ((NEAR_SIDE * face.height).max(INPUT) / INPUT).log2();
+    let side = INPUT
+        * ((octaves * NEAR_SIDE_STEPS_PER_OCTAVE).round() / NEAR_SIDE_STEPS_PER_OCTAVE).exp2();
+    let step = side / NEAR_CENTRE_STEPS_PER_SIDE;
+    let snap = |c: f32| (c / step).round() * step;
     Square {
-        cx: face.cx,
-        cy: face.cy,
-        side: (NEAR_SIDE * face.height).max(INPUT),
+        cx: snap(face.cx),
+        cy: snap(face.cy),
+        side,
     }
     .clamped(width, height)
 }
@@ -144,12 +180,22 @@ mod tests {
         let (w, h) = (1920, 1080);
         let small = face(1500.0, 300.0, 108.0);
         assert!(is_small(&small, w, h));
-        assert!(!is_small(&face(960.0, 540.0, 400.0), w, h));
+        assert!(is_small(&face(960.0, 540.0, 600.0), w, h));
+        assert!(!is_small(&face(960.0, 540.0, 700.0), w, h));
         let near = around(&small, w, h);
-        assert_eq!((near.cx, near.cy, near.side), (1500.0, 300.0, 432.0));
+        // Three face heights, to an eighth of an octave, about the face.
+        assert!((near.side / 324.0 - 1.0).abs() < 0.05, "{near:?}");
+        assert!(contains(&near, &small), "{near:?}");
+        // A pixel's difference in the box is the same square.
+        for moved in [face(1501.0, 299.0, 108.0), face(1500.0, 300.0, 109.0)] {
+            assert_eq!(around(&moved, w, h), near);
+        }
         // Near the frame's edge the square moves inside it.
         let edge = around(&face(1900.0, 20.0, 108.0), w, h);
-        assert_eq!((edge.cx, edge.cy), (1920.0 - 216.0, 216.0));
+        assert_eq!(
+            (edge.cx, edge.cy),
+            (1920.0 - edge.side / 2.0, edge.side / 2.0)
+        );
     }
 
     #[test]

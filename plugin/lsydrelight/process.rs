@@ -102,8 +102,13 @@ impl LsydRelight {
                 gst::debug!(
                     CAT,
                     imp = self,
-                    "looked for a small face: {} round the last one, {} tiles of the scan",
-                    if step.near { "again" } else { "not" },
+                    "looked for a small face: {}, {} round one, {} tiles of the scan",
+                    if step.whole_frame {
+                        "in the whole frame"
+                    } else {
+                        "not in the whole frame"
+                    },
+                    if step.near { "closer" } else { "not" },
                     step.tiles
                 );
             }

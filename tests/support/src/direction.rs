@@ -25,6 +25,8 @@ pub struct LightShape {
     pub strength: f64,
     /// Mean change over the face's image-left half less its image-right half, in percent.
     pub asymmetry: f64,
+    /// Mean change over the face, in percent: how much the light brightens it.
+    pub mean: f64,
 }
 
 /// The shape of the change from `input` to `output` over `face` (frame pixels).
@@ -58,6 +60,7 @@ pub fn light_shape(input: &impl Pixels, output: &impl Pixels, face: Region) -> L
     LightShape {
         strength: (squares / count.max(1) as f64).sqrt(),
         asymmetry: mean(left) - mean(right),
+        mean: mean((left.0 + right.0, left.1 + right.1)),
     }
 }
 

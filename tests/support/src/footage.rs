@@ -34,14 +34,25 @@ pub fn read_y4m(path: &Path, frames: usize) -> Result<Vec<RgbImage>, String> {
 /// `scripts/setup.sh full`) scaled to 720 rows and centred in a 1280 x 720
 /// frame of mid grey: a real face as a 720p webcam frames it.
 pub fn portrait_720p(media: &Path) -> Result<RgbImage, String> {
+    portrait_720p_leaning(media, 1.0)
+}
+
+/// [`portrait_720p`] with the person leaning towards the camera (`zoom` over 1)
+/// or away from it: the portrait scaled by `zoom` about her face.
+pub fn portrait_720p_leaning(media: &Path, zoom: f32) -> Result<RgbImage, String> {
     let path = media.join("astronaut.png");
     let portrait = image::open(&path)
         .map_err(|e| format!("{}: {e} (scripts/setup.sh full fetches it)", path.display()))?
         .to_rgb8();
+    let (placed, corner) = (720.0, [280.0, 0.0]);
+    let scale = placed / portrait.width() as f32;
+    let face = [0, 1].map(|k| corner[k] + PORTRAIT_FACE.0[k] * scale);
+    let side = (placed * zoom).round() as u32;
     let portrait =
-        image::imageops::resize(&portrait, 720, 720, image::imageops::FilterType::Triangle);
+        image::imageops::resize(&portrait, side, side, image::imageops::FilterType::Triangle);
+    let corner = [0, 1].map(|k| (face[k] + zoom * (corner[k] - face[k])).round() as i64);
     let mut frame = image::RgbImage::from_pixel(1280, 720, image::Rgb([96, 96, 96]));
-    image::imageops::overlay(&mut frame, &portrait, 280, 0);
+    image::imageops::overlay(&mut frame, &portrait, corner[0], corner[1]);
     Ok(RgbImage {
         width: 1280,
         height: 720,

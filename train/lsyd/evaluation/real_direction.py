@@ -95,19 +95,44 @@ def film_frames(path: Path, count: int) -> list[np.ndarray]:
 
 
 class Detector:
-    """BlazeFace short-range as the element runs it: the largest face's box in frame pixels, or None."""
+    """BlazeFace short-range as the element runs it: the largest face's box in frame pixels, or None.
+    A face smaller in the whole frame than ``1 / NEAR_SIDE`` of the input is looked at again in a
+    square of ``NEAR_SIDE`` face heights round it, whose box replaces the whole frame's, as the
+    element's detector does (``plugin/face/search.rs``): in the whole frame such a face's box is
+    coarse and jumps as the face moves."""
+
+    NEAR_SIDE = 3.0
 
     def __init__(self, model: Path):
         self.session = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
 
-    def box(self, frame: np.ndarray) -> list[float] | None:
-        tensor, place = face_detector.letterbox(frame)
+    def largest(self, image: np.ndarray) -> list[float] | None:
+        """The largest face's box in ``image``'s letterbox, in its pixels."""
+        tensor, place = face_detector.letterbox(image)
         outputs = self.session.run(None, {self.session.get_inputs()[0].name: tensor})
         regressors, scores = sorted(outputs, key=lambda o: o.shape[-1], reverse=True)
         faces = face_detector.decode(regressors, scores, place)
         if not faces:
             return None
         return max(faces, key=lambda f: (f["box"][2] - f["box"][0]) * (f["box"][3] - f["box"][1]))["box"]
+
+    def box(self, frame: np.ndarray) -> list[float] | None:
+        whole = self.largest(frame)
+        if whole is None:
+            return None
+        height, width = frame.shape[:2]
+        face_height = whole[3] - whole[1]
+        if face_height * face_detector.SIZE / max(width, height) >= face_detector.SIZE / self.NEAR_SIDE:
+            return whole
+        # The square round it: at least the input's size, no larger than the frame's shorter side,
+        # moved to lie inside the frame.
+        side = round(min(max(self.NEAR_SIDE * face_height, face_detector.SIZE), width, height))
+        x0 = min(max(round((whole[0] + whole[2] - side) / 2), 0), width - side)
+        y0 = min(max(round((whole[1] + whole[3] - side) / 2), 0), height - side)
+        near = self.largest(frame[y0 : y0 + side, x0 : x0 + side])
+        if near is None:
+            return whole
+        return [near[0] + x0, near[1] + y0, near[2] + x0, near[3] + y0]
 
 
 def crop(frame: np.ndarray, box: list[float], rule: dict, resolution: int) -> tuple[np.ndarray, tuple[slice, slice]]:
