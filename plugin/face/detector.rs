@@ -159,8 +159,9 @@ impl FaceDetector {
     /// whole frame again for faces that came in.
     pub fn detect(&mut self, frame: &Frame) -> Result<Vec<FaceBox>, EngineError> {
         let (w, h) = (frame.width, frame.height);
+        let mut lost_alone = false;
         if let Some(alone) = self.alone_small
-            && self.since_whole_frame + 1 < search::WHOLE_FRAME_EVERY
+            && self.since_whole_frame < search::WHOLE_FRAME_EVERY - 1
         {
             let faces = self.detect_in(frame, search::around(&alone, w, h))?;
             if !faces.is_empty() {
@@ -172,6 +173,7 @@ impl FaceDetector {
                 };
                 return Ok(faces);
             }
+            lost_alone = true;
         }
         self.since_whole_frame = 0;
         let mut faces = self.detect_in(frame, search::letterbox(w, h))?;
@@ -180,8 +182,13 @@ impl FaceDetector {
             ..SearchStep::default()
         };
         let mut small = small_faces(&faces, w, h);
-        if small.is_empty() {
-            small.extend(self.last_small);
+        // The face followed, where the whole frame misses it; not again in the
+        // square that just came back empty.
+        if let Some(last) = self.last_small.filter(|_| !lost_alone)
+            && small.len() < search::NEAR_LOOKS
+            && !faces.iter().any(|f| f.is_same_face(&last))
+        {
+            small.push(last);
         }
         self.look_closer(frame, &small, &mut faces, &mut step)?;
         if faces.is_empty() {
@@ -206,15 +213,17 @@ impl FaceDetector {
     fn remember(&mut self, faces: &[FaceBox], width: usize, height: usize) {
         self.last_small = small_faces(faces, width, height).first().copied();
         self.alone_small = match faces {
-            [face] => self.last_small.filter(|small| small == face),
+            [face] if search::is_small(face, width, height) => Some(*face),
             _ => None,
         };
     }
 
-    /// Looks again round each of `small`, merging what it finds into `faces`:
-    /// round the closer look's box of the detection before where it is the
-    /// same face, so that a still face is looked at in the same square every
-    /// time and keeps its box.
+    /// Looks again round each of `small`, merging what it finds into `faces`.
+    /// Round the closer look's box of the detection before where it is the
+    /// same face and has not moved by half its height, so that a still face
+    /// is looked at in the same square every time and keeps its box; round
+    /// the face as found where it moved further. A square as large as the
+    /// whole frame's letterbox would only look again at what it showed.
     fn look_closer(
         &mut self,
         frame: &Frame,
@@ -222,12 +231,18 @@ impl FaceDetector {
         faces: &mut Vec<FaceBox>,
         step: &mut SearchStep,
     ) -> Result<(), EngineError> {
+        let (w, h) = (frame.width, frame.height);
         for face in small {
+            let finer = self
+                .last_small
+                .filter(|last| (last.cx - face.cx).hypot(last.cy - face.cy) < 0.5 * last.height);
+            let square = search::around(&finer.unwrap_or(*face), w, h);
+            if square.side >= search::letterbox(w, h).side {
+                continue;
+            }
             step.near = true;
-            let finer = self.last_small.filter(|last| last.is_same_face(face));
-            let square = search::around(&finer.unwrap_or(*face), frame.width, frame.height);
             let near = self.detect_in(frame, square)?;
-            replace_or_add(faces, near);
+            replace_or_add(faces, near, |f| search::is_small(f, w, h));
         }
         Ok(())
     }
@@ -291,12 +306,15 @@ fn small_faces(faces: &[FaceBox], width: usize, height: usize) -> Vec<FaceBox> {
 }
 
 /// The faces `found` by a closer look merged into `faces`: one that is the same
-/// face as one already there replaces it (the closer look's box is the finer),
-/// keeping its place in the order; the others are appended.
-fn replace_or_add(faces: &mut Vec<FaceBox>, found: Vec<FaceBox>) {
+/// face as a small one already there replaces it (the closer look's box is the
+/// finer), keeping its place in the order; one the same as a face not small,
+/// which the whole frame boxes well and the square may cut, is left out; the
+/// others are appended.
+fn replace_or_add(faces: &mut Vec<FaceBox>, found: Vec<FaceBox>, small: impl Fn(&FaceBox) -> bool) {
     for face in found {
         match faces.iter_mut().find(|f| f.is_same_face(&face)) {
-            Some(coarse) => *coarse = face,
+            Some(coarse) if small(coarse) => *coarse = face,
+            Some(_) => {}
             None => faces.push(face),
         }
     }
@@ -492,11 +510,17 @@ mod tests {
     }
 
     #[test]
-    fn a_closer_look_replaces_the_coarse_box_in_its_place_and_adds_new_faces() {
+    fn a_closer_look_replaces_a_small_faces_coarse_box_in_its_place_and_adds_new_faces() {
+        // Small: under 150 px. The large face's box stays as the whole frame found it.
         let mut faces = vec![face_box(200.0, 180.0), face_box(900.0, 120.0)];
         replace_or_add(
             &mut faces,
-            vec![face_box(905.0, 100.0), face_box(1500.0, 60.0)],
+            vec![
+                face_box(210.0, 150.0),
+                face_box(905.0, 100.0),
+                face_box(1500.0, 60.0),
+            ],
+            |f| f.height < 150.0,
         );
         assert_eq!(
             faces,

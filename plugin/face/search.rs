@@ -27,26 +27,30 @@ const INPUT: f32 = super::detector::INPUT_SIZE as f32;
 /// Height, in input pixels, down to which the scan's tiles show every face.
 pub const MIN_FACE_INPUT: f32 = 24.0;
 /// Side of the square looked in round a small face, in face heights: there the
-/// face is a third of the input, 43 pixels high.
+/// face is a third of the input, 43 pixels high (more where the square is
+/// clamped to the frame's shorter side).
 pub const NEAR_SIDE: f32 = 3.0;
 /// Height, in the whole frame's input pixels, under which a face counts as
 /// small: shorter than in the square round it, where it is looked at again.
 /// In the whole frame such a face's box is coarse, and jumps as the face
-/// moves: the astronaut portrait in 720p is 19 input pixels high there, and
+/// moves: the astronaut portrait in 720p is boxed 19 input pixels high there, and
 /// leaning in and out by 6% her box switched between about 186 and 137 px
 /// high (scores 0.57 and 0.94); round her it keeps 142-145 px, scaled back
 /// (`tests/face.rs::a_face_leaning_in_and_out_keeps_its_box`). At this
-/// height the two looks show the face alike, so a face growing past it keeps
-/// its box.
+/// height the two looks show the face alike where the square is not clamped
+/// to the frame. In a 16:9 frame it is, first (a face over 240 px high in
+/// 720p): there a face growing past this height goes from a look where it is
+/// larger to the whole frame's, which no test measures yet.
 pub const SMALL_FACE_INPUT: f32 = INPUT / NEAR_SIDE;
 /// Small faces looked at again by one detection, the largest first: a call
-/// with two people in view has both boxed alike.
+/// with two people in view has both boxed by the closer look (the second's
+/// square from its whole-frame box; only the largest is remembered).
 pub const NEAR_LOOKS: usize = 2;
 /// A small face found alone is looked for round itself only, and the whole
 /// frame looked at again every this many detections (at the tracker's
 /// interval of 5 frames, every half second at 30 fps): a face that comes in
 /// waits that long to be seen, and the detector's time on a lone small face
-/// falls from two detections to four in three.
+/// falls from two network runs a detection to four in three detections.
 pub const WHOLE_FRAME_EVERY: u32 = 3;
 /// Tiles looked in by one detection that found no face.
 pub const TILES_PER_SEARCH: usize = 2;
@@ -70,12 +74,13 @@ pub fn is_small(face: &FaceBox, width: usize, height: usize) -> bool {
     face.height * INPUT / letterbox(width, height).side < SMALL_FACE_INPUT
 }
 
-/// Steps of the square looked in round a small face: its side an eighth of an
-/// octave apart (9%), its centre a sixteenth of its side. The detector's box of a
-/// still face differs by a pixel or so from one look to the next; on this grid
-/// the next look is made in the same square, finds the same box, and the
-/// network's crop stays put.
+/// The square looked in round a small face lies on a grid, so that a still
+/// face, boxed a pixel or so differently from one look to the next, is
+/// looked at in the same square and found with the same box (unless its box
+/// sits on a step, where it may take either of two squares). Its side in
+/// steps of an eighth of an octave (9%).
 const NEAR_SIDE_STEPS_PER_OCTAVE: f32 = 8.0;
+/// Its centre in steps of a sixteenth of its side.
 const NEAR_CENTRE_STEPS_PER_SIDE: f32 = 16.0;
 
 /// The square looked in round a small face, on the grid of

@@ -102,13 +102,9 @@ impl LsydRelight {
                 gst::debug!(
                     CAT,
                     imp = self,
-                    "looked for a small face: {}, {} round one, {} tiles of the scan",
-                    if step.whole_frame {
-                        "in the whole frame"
-                    } else {
-                        "not in the whole frame"
-                    },
-                    if step.near { "closer" } else { "not" },
+                    "face search: whole frame {}, closer look round a small face {}, {} tiles of the scan",
+                    step.whole_frame,
+                    step.near,
                     step.tiles
                 );
             }

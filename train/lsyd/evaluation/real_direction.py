@@ -98,8 +98,9 @@ class Detector:
     """BlazeFace short-range as the element runs it: the largest face's box in frame pixels, or None.
     A face smaller in the whole frame than ``1 / NEAR_SIDE`` of the input is looked at again in a
     square of ``NEAR_SIDE`` face heights round it, whose box replaces the whole frame's, as the
-    element's detector does (``plugin/face/search.rs``): in the whole frame such a face's box is
-    coarse and jumps as the face moves."""
+    element's detector does on a first detection (``plugin/face/search.rs``; without the grid
+    its later squares keep): in the whole frame such a face's box is coarse and jumps as the face
+    moves."""
 
     NEAR_SIDE = 3.0
 
