@@ -316,33 +316,11 @@ fn a_real_face_leaning_in_and_out_keeps_its_light() {
             portrait_720p_leaning(folder, lean).unwrap()
         })
         .collect();
-    let model = gstlsydrelight::paths::default_model();
-    let relit = relight_with(
-        &frames,
-        &model,
-        "target-preset=warm-key-left target-transition=0",
-        Format::Rgb,
-    )
-    .unwrap();
-    let input = denoised(
-        &through(&frames, Format::Rgb).unwrap(),
-        &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
-    )
-    .unwrap();
     // After the face's fade-in of 15 frames.
-    let means: Vec<f64> = relit
-        .iter()
-        .zip(&input)
+    let means: Vec<f64> = relit_shapes(&frames, "warm-key-left", "")
+        .into_iter()
         .skip(15)
-        .map(|((output, shown), input)| {
-            let face = shown.expect("her face is followed").face;
-            light_shape(
-                &View::pixels(input.frame()),
-                &View::pixels(output.frame()),
-                face,
-            )
-            .mean
-        })
+        .map(|relit| relit.expect("her face is followed").1.mean)
         .collect();
     let (lo, hi) = (
         means.iter().copied().fold(f64::MAX, f64::min),
@@ -386,6 +364,19 @@ fn a_small_face_off_centre_in_1080p_is_found_and_relit() {
 /// and the shape of the change there against the input as the element's
 /// denoising saw it.
 fn relit_to(frames: &[RgbImage], preset: &str, properties: &str) -> (Relit, LightShape) {
+    relit_shapes(frames, preset, properties)
+        .pop()
+        .flatten()
+        .expect("the face is found and relit")
+}
+
+/// [`relit_to`] for every frame: how the element showed each frame's face
+/// and the shape of its change there, None where it relit no face.
+fn relit_shapes(
+    frames: &[RgbImage],
+    preset: &str,
+    properties: &str,
+) -> Vec<Option<(Relit, LightShape)>> {
     let model = gstlsydrelight::paths::default_model();
     let relit = relight_with(
         frames,
@@ -394,17 +385,23 @@ fn relit_to(frames: &[RgbImage], preset: &str, properties: &str) -> (Relit, Ligh
         Format::Rgb,
     )
     .unwrap();
-    let (output, shown) = relit.last().unwrap();
-    let shown = shown.expect("the face is found and relit");
     let input = denoised(
         &through(frames, Format::Rgb).unwrap(),
         &relit.iter().map(|(_, r)| *r).collect::<Vec<_>>(),
     )
     .unwrap();
-    let shape = light_shape(
-        &View::pixels(input.last().unwrap().frame()),
-        &View::pixels(output.frame()),
-        shown.face,
-    );
-    (shown, shape)
+    relit
+        .iter()
+        .zip(&input)
+        .map(|((output, shown), input)| {
+            shown.map(|shown| {
+                let shape = light_shape(
+                    &View::pixels(input.frame()),
+                    &View::pixels(output.frame()),
+                    shown.face,
+                );
+                (shown, shape)
+            })
+        })
+        .collect()
 }
