@@ -26,6 +26,9 @@ pub const INPUT_SIZE: usize = 128;
 pub const ANCHORS: usize = 896;
 /// Lowest score of a face.
 pub const MIN_SCORE: f32 = 0.5;
+/// How much higher the other look must score to box a small face the look
+/// that boxed it last did not (see [`Look`]).
+const LOOK_HYSTERESIS: f32 = 0.1;
 /// Boxes overlapping the best one by more than this IoU are merged into it.
 pub const SUPPRESSION_IOU: f32 = 0.3;
 /// Strides of the network's four anchor layers, in input pixels.
@@ -97,16 +100,31 @@ pub struct FaceDetector {
     /// A small face found by the last detection, looked for round where it was
     /// when the whole frame shows none.
     last_small: Option<FaceBox>,
-    /// The last detection's face when it found one alone and small: the next
-    /// detections look only round it, and at the whole frame every
-    /// [`search::WHOLE_FRAME_EVERY`]-th time.
-    alone_small: Option<FaceBox>,
+    /// The look that boxed it, which the next detection keeps unless the
+    /// other scores [`LOOK_HYSTERESIS`] higher.
+    last_look: Option<Look>,
+    /// The last detection's face when it found one alone and small, and the
+    /// look that boxed it: the next detections look only there, and at both
+    /// looks every [`search::WHOLE_FRAME_EVERY`]-th time.
+    alone_small: Option<(FaceBox, Look)>,
     /// Detections since the whole frame was looked at.
     since_whole_frame: u32,
     /// The tile of [`search::tiles`] the next scan starts at.
     next_tile: usize,
     /// What the last detection looked in, for the element's debug log.
     pub last_search: SearchStep,
+}
+
+/// Which look boxed a small face: the whole frame's letterbox, where it is
+/// small, or the square round it, where it is a third of the input. Where the
+/// face is small the whole frame's box is often coarse and poorly scored
+/// (the portrait in 720p: 0.57), but not always: the film clip's face, 24
+/// input pixels high there, scores 0.92-0.98 in the whole frame and
+/// 0.79-0.93 round itself, its box steadier in the whole frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Look {
+    WholeFrame,
+    Closer,
 }
 
 /// Where one detection looked.
@@ -142,6 +160,7 @@ impl FaceDetector {
             session,
             anchors: anchors(),
             last_small: None,
+            last_look: None,
             alone_small: None,
             since_whole_frame: 0,
             next_tile: 0,
@@ -152,23 +171,29 @@ impl FaceDetector {
     /// The faces in `frame`, the whole frame's best score first, in the
     /// frame's pixels. Faces too small for the whole frame are looked at as
     /// [`search`] says: again round themselves (the closer look's box replaces
-    /// the whole frame's), round the small face found before when the whole
-    /// frame shows none, and, when no face is found, in the next tiles of a
-    /// scan. A small face found alone is looked for round itself only, but for
-    /// every [`search::WHOLE_FRAME_EVERY`]-th detection, which looks at the
-    /// whole frame again for faces that came in.
+    /// the whole frame's where it scores higher, see [`Look`]), round the small
+    /// face found before when the whole frame shows none, and, when no face is
+    /// found, in the next tiles of a scan. A small face found alone is looked
+    /// for only in the look that boxed it, but for every
+    /// [`search::WHOLE_FRAME_EVERY`]-th detection, which takes both looks
+    /// again, the whole frame's for faces that came in.
     pub fn detect(&mut self, frame: &Frame) -> Result<Vec<FaceBox>, EngineError> {
         let (w, h) = (frame.width, frame.height);
         let mut lost_alone = false;
-        if let Some(alone) = self.alone_small
+        if let Some((alone, look)) = self.alone_small
             && self.since_whole_frame < search::WHOLE_FRAME_EVERY - 1
         {
-            let faces = self.detect_in(frame, search::around(&alone, w, h))?;
+            let square = match look {
+                Look::WholeFrame => search::letterbox(w, h),
+                Look::Closer => search::around(&alone, w, h),
+            };
+            let faces = self.detect_in(frame, square)?;
             if !faces.is_empty() {
                 self.since_whole_frame += 1;
-                self.remember(&faces, w, h);
+                self.remember(&faces, look, w, h);
                 self.last_search = SearchStep {
-                    near: true,
+                    whole_frame: look == Look::WholeFrame,
+                    near: look == Look::Closer,
                     ..SearchStep::default()
                 };
                 return Ok(faces);
@@ -177,6 +202,7 @@ impl FaceDetector {
         }
         self.since_whole_frame = 0;
         let mut faces = self.detect_in(frame, search::letterbox(w, h))?;
+        let whole_frame = faces.clone();
         let mut step = SearchStep {
             whole_frame: true,
             ..SearchStep::default()
@@ -203,17 +229,23 @@ impl FaceDetector {
             let small = small_faces(&faces, w, h);
             self.look_closer(frame, &small, &mut faces, &mut step)?;
         }
-        self.remember(&faces, w, h);
+        // A face that kept the whole frame's box was boxed better there.
+        let look = match small_faces(&faces, w, h).first() {
+            Some(face) if whole_frame.contains(face) => Look::WholeFrame,
+            _ => Look::Closer,
+        };
+        self.remember(&faces, look, w, h);
         self.last_search = step;
         Ok(faces)
     }
 
     /// What the next detection looks round: the largest small face, and the
-    /// face when it is small and alone.
-    fn remember(&mut self, faces: &[FaceBox], width: usize, height: usize) {
+    /// face when it is small and alone, with the `look` that boxed it.
+    fn remember(&mut self, faces: &[FaceBox], look: Look, width: usize, height: usize) {
         self.last_small = small_faces(faces, width, height).first().copied();
+        self.last_look = self.last_small.map(|_| look);
         self.alone_small = match faces {
-            [face] if search::is_small(face, width, height) => Some(*face),
+            [face] if search::is_small(face, width, height) => Some((*face, look)),
             _ => None,
         };
     }
@@ -242,7 +274,14 @@ impl FaceDetector {
             }
             step.near = true;
             let near = self.detect_in(frame, square)?;
-            replace_or_add(faces, near, |f| search::is_small(f, w, h));
+            // The look that boxed the face followed keeps it on a near tie, so a
+            // still face whose two looks score alike is not boxed by each in turn.
+            let bias = match self.last_look.filter(|_| finer.is_some()) {
+                Some(Look::Closer) => LOOK_HYSTERESIS,
+                Some(Look::WholeFrame) => -LOOK_HYSTERESIS,
+                None => 0.0,
+            };
+            replace_or_add(faces, near, bias, |f| search::is_small(f, w, h));
         }
         Ok(())
     }
@@ -306,14 +345,20 @@ fn small_faces(faces: &[FaceBox], width: usize, height: usize) -> Vec<FaceBox> {
 }
 
 /// The faces `found` by a closer look merged into `faces`: one that is the same
-/// face as a small one already there replaces it (the closer look's box is the
+/// face as a small one already there replaces it where it scores as high or
+/// higher, `bias` added to its score (the closer look's box is then the
 /// finer), keeping its place in the order; one the same as a face not small,
 /// which the whole frame boxes well and the square may cut, is left out; the
 /// others are appended.
-fn replace_or_add(faces: &mut Vec<FaceBox>, found: Vec<FaceBox>, small: impl Fn(&FaceBox) -> bool) {
+fn replace_or_add(
+    faces: &mut Vec<FaceBox>,
+    found: Vec<FaceBox>,
+    bias: f32,
+    small: impl Fn(&FaceBox) -> bool,
+) {
     for face in found {
         match faces.iter_mut().find(|f| f.is_same_face(&face)) {
-            Some(coarse) if small(coarse) => *coarse = face,
+            Some(coarse) if small(coarse) && face.score + bias >= coarse.score => *coarse = face,
             Some(_) => {}
             None => faces.push(face),
         }
@@ -520,6 +565,7 @@ mod tests {
                 face_box(905.0, 100.0),
                 face_box(1500.0, 60.0),
             ],
+            0.0,
             |f| f.height < 150.0,
         );
         assert_eq!(
@@ -530,6 +576,20 @@ mod tests {
                 face_box(1500.0, 60.0)
             ]
         );
+        // A closer look that scores lower than the whole frame's box leaves it.
+        let worse = FaceBox {
+            score: 0.8,
+            ..face_box(910.0, 110.0)
+        };
+        replace_or_add(&mut faces, vec![worse], 0.0, |f| f.height < 150.0);
+        assert_eq!(faces[1], face_box(905.0, 100.0));
+        // Unless the look that boxed it last was the closer one, by less than the hysteresis.
+        let tie = FaceBox {
+            score: 0.82,
+            ..face_box(910.0, 110.0)
+        };
+        replace_or_add(&mut faces, vec![tie], LOOK_HYSTERESIS, |f| f.height < 150.0);
+        assert_eq!(faces[1], tie);
     }
 
     #[test]

@@ -7,10 +7,11 @@
 //!
 //! - round a small face, a square of [`NEAR_SIDE`] face heights, where the face
 //!   is a third of the input: round the one the whole frame shows, whose box
-//!   there is coarse, or, when the whole frame shows none, round the one found
-//!   before, so that it keeps finding the face it follows; a small face found
-//!   alone is looked for round itself only, and the whole frame looked at
-//!   again every [`WHOLE_FRAME_EVERY`] detections;
+//!   there is often coarse (the detector keeps the better scored of the two
+//!   boxes), or, when the whole frame shows none, round the one found before,
+//!   so that it keeps finding the face it follows; a small face found alone
+//!   is looked for only in the look that boxed it, and in both every
+//!   [`WHOLE_FRAME_EVERY`] detections;
 //! - when it found no face at all, the next few squares of a fixed scan of
 //!   tiles ([`TILES_PER_SEARCH`] a detection): the frame's shorter side, its
 //!   half and its quarter. Each scale is for the faces the one above shows
@@ -46,11 +47,12 @@ pub const SMALL_FACE_INPUT: f32 = INPUT / NEAR_SIDE;
 /// with two people in view has both boxed by the closer look (the second's
 /// square from its whole-frame box; only the largest is remembered).
 pub const NEAR_LOOKS: usize = 2;
-/// A small face found alone is looked for round itself only, and the whole
-/// frame looked at again every this many detections (at the tracker's
-/// interval of 5 frames, every half second at 30 fps): a face that comes in
-/// waits that long to be seen, and the detector's time on a lone small face
-/// falls from two network runs a detection to four in three detections.
+/// A small face found alone is looked for only in the look that boxed it
+/// (round itself, or the whole frame), and in both every this many detections
+/// (at the tracker's interval of 5 frames, every half second at 30 fps): a
+/// face that comes in waits that long to be seen, and the detector's time on
+/// a lone small face falls from two network runs a detection to four in
+/// three detections.
 pub const WHOLE_FRAME_EVERY: u32 = 3;
 /// Tiles looked in by one detection that found no face.
 pub const TILES_PER_SEARCH: usize = 2;
