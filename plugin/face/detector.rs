@@ -179,7 +179,8 @@ impl FaceDetector {
     /// again, the whole frame's for faces that came in.
     pub fn detect(&mut self, frame: &Frame) -> Result<Vec<FaceBox>, EngineError> {
         let (w, h) = (frame.width, frame.height);
-        let mut lost_alone = false;
+        // The look a lone face was just lost in, not taken again.
+        let mut lost_alone = None;
         if let Some((alone, look)) = self.alone_small
             && self.since_whole_frame < search::WHOLE_FRAME_EVERY - 1
         {
@@ -198,19 +199,24 @@ impl FaceDetector {
                 };
                 return Ok(faces);
             }
-            lost_alone = true;
+            lost_alone = Some(look);
         }
         self.since_whole_frame = 0;
-        let mut faces = self.detect_in(frame, search::letterbox(w, h))?;
+        let whole_frame_again = lost_alone != Some(Look::WholeFrame);
+        let mut faces = if whole_frame_again {
+            self.detect_in(frame, search::letterbox(w, h))?
+        } else {
+            Vec::new()
+        };
         let whole_frame = faces.clone();
         let mut step = SearchStep {
-            whole_frame: true,
+            whole_frame: whole_frame_again,
             ..SearchStep::default()
         };
         let mut small = small_faces(&faces, w, h);
         // The face followed, where the whole frame misses it; not again in the
         // square that just came back empty.
-        if let Some(last) = self.last_small.filter(|_| !lost_alone)
+        if let Some(last) = self.last_small.filter(|_| lost_alone != Some(Look::Closer))
             && small.len() < search::NEAR_LOOKS
             && !faces.iter().any(|f| f.is_same_face(&last))
         {

@@ -229,3 +229,20 @@ def test_a_small_face_is_boxed_from_a_closer_look_as_the_element_boxes_it():
         heights.append((box[3] - box[1]) / zoom)
     assert all(130 < h < 160 for h in heights), heights
     assert max(heights) / min(heights) < 1.06, heights
+
+
+def test_a_small_face_the_whole_frame_boxes_better_keeps_the_whole_frames_box():
+    """Leaning in until her face is 34 of the whole frame's 128 input pixels high, still small,
+    the portrait scores higher in the whole frame than in the square round her: as in the
+    element, the better scored box is kept."""
+    import skimage
+
+    frame = real_direction.astronaut_720p(Path(skimage.__file__).parent / "data" / "astronaut.png")
+    lean = cv2.getRotationMatrix2D((600, 180), 0, 2.3)
+    zoomed = cv2.warpAffine(frame, lean, (1280, 720), borderValue=(96, 96, 96))
+    detector = real_direction.Detector(ROOT / "models" / "face" / "blazeface.onnx")
+    whole, whole_score = detector.largest_scored(zoomed)
+    assert (whole[3] - whole[1]) / 1280 < 1 / detector.NEAR_SIDE
+    _, near_score = detector.closer(zoomed, whole)
+    assert near_score < whole_score
+    assert detector.box(zoomed) == whole

@@ -97,43 +97,57 @@ def film_frames(path: Path, count: int) -> list[np.ndarray]:
 class Detector:
     """BlazeFace short-range as the element runs it: the largest face's box in frame pixels, or None.
     A face smaller in the whole frame than ``1 / NEAR_SIDE`` of the input is looked at again in a
-    square of ``NEAR_SIDE`` face heights round it, whose box replaces the whole frame's, as the
-    element's detector does on a first detection (``plugin/face/search.rs``; without the grid
-    its later squares keep): in the whole frame such a face's box is coarse and jumps as the face
-    moves."""
+    square of ``NEAR_SIDE`` face heights round it, whose box replaces the whole frame's where it
+    scores as high, as the element's detector does on a first detection (``plugin/face/search.rs``
+    and ``detector.rs``; without the grid its later squares keep, nor the margin by which the
+    look that boxed a face keeps it): in the whole frame such a face's box is often coarse and
+    jumps as the face moves (the 720p portrait), but some it boxes better there (the film clip)."""
 
     NEAR_SIDE = 3.0
 
     def __init__(self, model: Path):
         self.session = ort.InferenceSession(str(model), providers=["CPUExecutionProvider"])
 
-    def largest(self, image: np.ndarray) -> list[float] | None:
-        """The largest face's box in ``image``'s letterbox, in its pixels."""
+    def largest_scored(self, image: np.ndarray) -> tuple[list[float], float] | None:
+        """The largest face's box in ``image``'s letterbox, in its pixels, and its score."""
         tensor, place = face_detector.letterbox(image)
         outputs = self.session.run(None, {self.session.get_inputs()[0].name: tensor})
         regressors, scores = sorted(outputs, key=lambda o: o.shape[-1], reverse=True)
         faces = face_detector.decode(regressors, scores, place)
         if not faces:
             return None
-        return max(faces, key=lambda f: (f["box"][2] - f["box"][0]) * (f["box"][3] - f["box"][1]))["box"]
+        face = max(faces, key=lambda f: (f["box"][2] - f["box"][0]) * (f["box"][3] - f["box"][1]))
+        return face["box"], face["score"]
+
+    def largest(self, image: np.ndarray) -> list[float] | None:
+        """The largest face's box in ``image``'s letterbox, in its pixels."""
+        found = self.largest_scored(image)
+        return None if found is None else found[0]
 
     def box(self, frame: np.ndarray) -> list[float] | None:
-        whole = self.largest(frame)
-        if whole is None:
+        found = self.largest_scored(frame)
+        if found is None:
             return None
+        whole, whole_score = found
         height, width = frame.shape[:2]
-        face_height = whole[3] - whole[1]
-        if face_height * face_detector.SIZE / max(width, height) >= face_detector.SIZE / self.NEAR_SIDE:
+        if (whole[3] - whole[1]) * face_detector.SIZE / max(width, height) >= face_detector.SIZE / self.NEAR_SIDE:
             return whole
-        # The square round it: at least the input's size, no larger than the frame's shorter side,
-        # moved to lie inside the frame.
-        side = round(min(max(self.NEAR_SIDE * face_height, face_detector.SIZE), width, height))
+        near = self.closer(frame, whole)
+        return whole if near is None or near[1] < whole_score else near[0]
+
+    def closer(self, frame: np.ndarray, whole: list[float]) -> tuple[list[float], float] | None:
+        """The largest face's box and score in the square of ``NEAR_SIDE`` face heights round
+        ``whole``: at least the input's size, no larger than the frame's shorter side, moved to
+        lie inside the frame; the box in frame pixels."""
+        height, width = frame.shape[:2]
+        side = round(min(max(self.NEAR_SIDE * (whole[3] - whole[1]), face_detector.SIZE), width, height))
         x0 = min(max(round((whole[0] + whole[2] - side) / 2), 0), width - side)
         y0 = min(max(round((whole[1] + whole[3] - side) / 2), 0), height - side)
-        near = self.largest(frame[y0 : y0 + side, x0 : x0 + side])
+        near = self.largest_scored(frame[y0 : y0 + side, x0 : x0 + side])
         if near is None:
-            return whole
-        return [near[0] + x0, near[1] + y0, near[2] + x0, near[3] + y0]
+            return None
+        box, score = near
+        return [box[0] + x0, box[1] + y0, box[2] + x0, box[3] + y0], score
 
 
 def crop(frame: np.ndarray, box: list[float], rule: dict, resolution: int) -> tuple[np.ndarray, tuple[slice, slice]]:
