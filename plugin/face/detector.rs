@@ -137,6 +137,9 @@ pub struct SearchStep {
     pub near: bool,
     /// Tiles of the scan (none when a face was found without them).
     pub tiles: usize,
+    /// The largest small face found is boxed as the whole frame boxed it: it
+    /// scored higher there than round itself (see [`Look`]).
+    pub whole_frame_box: bool,
 }
 
 impl FaceDetector {
@@ -195,6 +198,7 @@ impl FaceDetector {
                 self.last_search = SearchStep {
                     whole_frame: look == Look::WholeFrame,
                     near: look == Look::Closer,
+                    whole_frame_box: look == Look::WholeFrame,
                     ..SearchStep::default()
                 };
                 return Ok(faces);
@@ -241,7 +245,10 @@ impl FaceDetector {
             _ => Look::Closer,
         };
         self.remember(&faces, look, w, h);
-        self.last_search = step;
+        self.last_search = SearchStep {
+            whole_frame_box: self.last_small.is_some() && look == Look::WholeFrame,
+            ..step
+        };
         Ok(faces)
     }
 

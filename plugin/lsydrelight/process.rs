@@ -102,10 +102,12 @@ impl LsydRelight {
                 gst::debug!(
                     CAT,
                     imp = self,
-                    "face search: whole frame {}, closer look round a small face {}, {} tiles of the scan",
+                    "face search: whole frame {}, closer look round a small face {}, {} tiles of the scan; \
+                     the small face boxed by the whole frame, which scored it higher: {}",
                     step.whole_frame,
                     step.near,
-                    step.tiles
+                    step.tiles,
+                    step.whole_frame_box
                 );
             }
             if let Some(face) = region.detected {
