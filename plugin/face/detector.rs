@@ -130,7 +130,9 @@ enum Look {
 /// Where one detection looked.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SearchStep {
-    /// At the whole frame's letterbox (not only round a small face alone in it).
+    /// At the whole frame's letterbox: not where a lone small face boxed
+    /// round itself is looked for there only, nor a second time where a lone
+    /// face boxed by the whole frame was just lost in it.
     pub whole_frame: bool,
     /// Round a small face: the one the whole frame shows, or the one the
     /// detection before found.
