@@ -196,7 +196,7 @@ impl FaceDetector {
             let faces = self.detect_in(frame, square)?;
             if !faces.is_empty() {
                 self.since_whole_frame += 1;
-                self.remember(&faces, look, w, h);
+                self.remember(&faces, |_| look, w, h);
                 self.last_search = SearchStep {
                     whole_frame: look == Look::WholeFrame,
                     near: look == Look::Closer,
@@ -242,25 +242,39 @@ impl FaceDetector {
             self.look_closer(frame, &small, &mut faces, &mut step)?;
         }
         // A face that kept the whole frame's box was boxed better there.
-        let look = match small_faces(&faces, w, h).first() {
-            Some(face) if whole_frame.contains(face) => Look::WholeFrame,
-            _ => Look::Closer,
-        };
-        self.remember(&faces, look, w, h);
+        self.remember(
+            &faces,
+            |face| {
+                if whole_frame.contains(face) {
+                    Look::WholeFrame
+                } else {
+                    Look::Closer
+                }
+            },
+            w,
+            h,
+        );
         self.last_search = SearchStep {
-            whole_frame_box: self.last_small.is_some() && look == Look::WholeFrame,
+            whole_frame_box: self.last_look == Some(Look::WholeFrame),
             ..step
         };
         Ok(faces)
     }
 
     /// What the next detection looks round: the largest small face, and the
-    /// face when it is small and alone, with the `look` that boxed it.
-    fn remember(&mut self, faces: &[FaceBox], look: Look, width: usize, height: usize) {
+    /// face when it is small and alone, each with the look that boxed it
+    /// (`look_of`).
+    fn remember(
+        &mut self,
+        faces: &[FaceBox],
+        look_of: impl Fn(&FaceBox) -> Look,
+        width: usize,
+        height: usize,
+    ) {
         self.last_small = small_faces(faces, width, height).first().copied();
-        self.last_look = self.last_small.map(|_| look);
+        self.last_look = self.last_small.as_ref().map(&look_of);
         self.alone_small = match faces {
-            [face] if search::is_small(face, width, height) => Some((*face, look)),
+            [face] if search::is_small(face, width, height) => Some((*face, look_of(face))),
             _ => None,
         };
     }
