@@ -45,10 +45,12 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from . import contract, data, losses, model
+from . import contract, data, losses, model, runs
 from .export import network_from_model, parity, reference_run, write_stages
 from .runs import LIGHT_FIT_RECORD, load_network
 
+# A model folder's saved network, which fine-tuning starts from (models/CONTRACT.md).
+SAVED_NETWORK = "network.pt"
 # Frames encoded at a time when the features are computed.
 ENCODE_BATCH = 128
 
@@ -62,6 +64,49 @@ def pooled_features(net, images: np.ndarray) -> torch.Tensor:
             _, feats = net.encode(data.to_tensor(images[i : i + ENCODE_BATCH]))
             out.append(net.light_decoder.pool(feats[1], feats[3], feats[5]))
     return torch.cat(out)
+
+
+# The face's ellipse round its keypoints: its half-width as a share of the jaw's, and how far
+# above the brows it reaches (the forehead), in brows-to-chin heights.
+FACE_WIDTH_MARGIN = 1.1
+FOREHEAD = 0.35
+# Beyond the ellipse the face fades into the other frame's surround over this share of its size.
+FACE_FADE = 0.1
+
+
+def face_masks(keypoints: np.ndarray, size: int, resolution: int) -> np.ndarray:
+    """Per frame, a soft ellipse over the face (jaw, brows and forehead) from its 68 keypoints in
+    a ``size``-pixel capture, as (N, R, R, 1) weights in [0, 1] at network resolution."""
+    k = keypoints[:, :27] * (resolution / size)  # jaw line and brows
+    left, right = k[..., 0].min(1), k[..., 0].max(1)
+    brows, chin = k[:, 17:27, 1].min(1), k[:, :17, 1].max(1)
+    top = brows - FOREHEAD * (chin - brows)
+    cx, cy = (left + right) / 2, (top + chin) / 2
+    ax, ay = FACE_WIDTH_MARGIN * (right - left) / 2, (chin - top) / 2
+    grid = np.arange(resolution) + 0.5
+    dx = (grid[None, None, :] - cx[:, None, None]) / ax[:, None, None]
+    dy = (grid[None, :, None] - cy[:, None, None]) / ay[:, None, None]
+    r = np.sqrt(dx**2 + dy**2)
+    return np.clip((1.0 + FACE_FADE - r) / FACE_FADE, 0.0, 1.0)[..., None].astype(np.float32)
+
+
+def session_face_masks(session: Path, resolution: int) -> np.ndarray:
+    """``face_masks`` of a capture session's frames, from its keypoints."""
+    size = data.Capture.load(session).face.shape[1]
+    return face_masks(np.load(session / "keypoints.npy"), size, resolution)
+
+
+def surround_swapped(images: np.ndarray, masks: np.ndarray, rng: np.random.Generator, share: float) -> np.ndarray:
+    """A ``share`` of a session's frames, drawn at random, with their face (``masks``) over the
+    surround (hair, clothes, room) of another of its frames, also drawn at random; the rest as
+    they are. The surround then shows some other screen's light, as a real crop's collar, helmet
+    or wall shows none, so a light decoder fitted on all of them can read the light only off the
+    face."""
+    other = rng.permutation(len(images))
+    kept = rng.random(len(images)) >= share
+    other[kept] = np.flatnonzero(kept)
+    mixed = masks * images + (1.0 - masks) * images[other]
+    return np.round(mixed).astype(np.uint8)
 
 
 def agreement(pred: np.ndarray, true: np.ndarray) -> dict[str, float]:
@@ -95,6 +140,7 @@ class FitSettings:
     colour: float = 1.0
     code: float = 0.0
     seed: int = 0
+    swap_surround: float = 0.0  # the share of frames fitted on with another frame's surround
 
 
 class CodeDistance:
@@ -121,6 +167,12 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
     sessions = data.capture_dirs(data_root / "captures")
     t0 = time.time()
     frames = [data.session_frames(s, resolution) for s in sessions]
+    if settings.swap_surround:
+        rng = np.random.default_rng(settings.seed)
+        frames = [
+            (surround_swapped(images, session_face_masks(s, resolution), rng, settings.swap_surround), lights)
+            for s, (images, lights) in zip(sessions, frames)
+        ]
     images = np.concatenate([f[0] for f in frames])
     lights = torch.from_numpy(np.concatenate([f[1] for f in frames]))
     features = pooled_features(net, images)
@@ -171,31 +223,48 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
     }
 
 
-def refit(model_dir: Path, data_root: Path, out: Path, settings: FitSettings) -> dict:
+def refit(model_dir: Path, data_root: Path, out: Path, settings: FitSettings, validation: Path | None = None) -> dict:
     """Refits an exported model's light decoder and writes the model to ``out``: the other
-    stages copied, the light decoder re-exported and the whole chain checked."""
+    stages copied, the light decoder re-exported and the whole chain checked, the saved network
+    (where the model has one) given the refitted light decoder. ``validation`` is the set scored
+    before and after (default: ``data_root/validation``)."""
     if out.resolve() == model_dir.resolve() or model_dir.resolve().is_relative_to(out.resolve()):
         raise SystemExit(f"--out {out} would replace the model it refits; choose another folder")
     net = network_from_model(model_dir)
     manifest = contract.read(model_dir / "model.json")
     resolution = manifest["resolution"]
-    validation = data.Heldout.load(data_root / "validation")
-    record = fit(net, data_root, validation, resolution, settings)
+    scored = data.Heldout.load(validation or data_root / "validation")
+    record = fit(net, data_root, scored, resolution, settings)
 
     if out.exists():
         shutil.rmtree(out)
     shutil.copytree(model_dir, out)
     specs = contract.stage_specs(resolution, manifest["widths"])
-    image = data.to_tensor(data.area_resize(validation.images[0, 0], resolution))[None]
-    lights = [torch.from_numpy(validation.lights[i])[None] for i in (0, 4)]
+    image = data.to_tensor(data.area_resize(scored.images[0, 0], resolution))[None]
+    lights = [torch.from_numpy(scored.lights[i])[None] for i in (0, 4)]
     ref = reference_run(net, image, *lights)
     write_stages(net, {"light_decoder": specs["light_decoder"]}, out, ref)
     checked = parity(out, specs, ref)
     manifest["training"]["light_refit"] = record
+    if (model_dir / SAVED_NETWORK).exists():
+        # Fine-tuning starts from the saved network: it gets the refitted light decoder too.
+        refit_saved_network(net, model_dir / SAVED_NETWORK, out / SAVED_NETWORK, record)
     manifest.get("metrics", {}).pop("heldout", None)
     manifest["parity"].update(checked)  # other stages (presence) keep their own
     contract.write(out / "model.json", manifest)
     return record
+
+
+def refit_saved_network(net: model.LcfnNet, saved: Path, out: Path, record: dict) -> None:
+    """Writes the saved network ``saved`` to ``out`` with ``net``'s light decoder in place of its
+    own, every other weight as saved, and the refit's ``record`` in its provenance."""
+    cfg, state = runs.read_network(saved)
+    refitted = net.state_dict()
+    state = {k: refitted[k] if k.startswith("light_decoder.") else v for k, v in state.items()}
+    whole = model.build(cfg)
+    whole.load_state_dict(state)
+    source = torch.load(saved, map_location="cpu", weights_only=True).get("source", {})
+    runs.save_network(whole, cfg, out, {**source, "light_refit": record})
 
 
 # What ``fit_after`` copies of the run it starts from: the records the export reads.
@@ -258,6 +327,7 @@ def main() -> None:
         "--run", type=Path, help="a training run (say one without light prediction) given a light decoder fitted after"
     )
     p.add_argument("--data", type=Path, default=Path("data"), help="captures, validation and held-out sets")
+    p.add_argument("--validation", type=Path, help="the set scored before and after (default: DATA/validation)")
     p.add_argument("--out", type=Path, required=True, help="the refitted model's folder (replaced), or the run's")
     p.add_argument("--steps", type=int, default=4000)
     p.add_argument("--batch", type=int, default=64)
@@ -265,12 +335,25 @@ def main() -> None:
     p.add_argument("--colour", type=float, default=1.0, help="weight of the mean colour's L1")
     p.add_argument("--code", type=float, default=0.0, help="weight of the light code's standardised squared error")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument(
+        "--swap-surround",
+        type=float,
+        default=0.0,
+        help="share of the frames fitted on with their face over another frame's surround (1: read the face)",
+    )
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
     a = p.parse_args()
     if a.threads:
         torch.set_num_threads(a.threads)
-    settings = FitSettings(steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, code=a.code, seed=a.seed)
-    record = refit(a.model, a.data, a.out, settings) if a.model else fit_after(a.run, a.data, a.out, settings)
+    settings = FitSettings(
+        steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, code=a.code, seed=a.seed, swap_surround=a.swap_surround
+    )
+    if a.run and a.validation:
+        raise SystemExit("--validation is for --model; a run is scored on DATA/validation")
+    if a.model:
+        record = refit(a.model, a.data, a.out, settings, a.validation)
+    else:
+        record = fit_after(a.run, a.data, a.out, settings)
     print(json.dumps(record, indent=2))
 
 

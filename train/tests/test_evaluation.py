@@ -12,7 +12,7 @@ import pytest
 from conftest import ROOT
 
 from lsyd import evaluation
-from lsyd.evaluation import colour_tracking, direction, evaluate, key_colour, real_direction
+from lsyd.evaluation import colour_tracking, direction, evaluate, key_colour, real_direction, surround
 
 COMMANDS = (
     "evaluate",
@@ -24,6 +24,7 @@ COMMANDS = (
     "direction",
     "colour_tracking",
     "key_colour",
+    "surround",
 )
 
 
@@ -246,3 +247,12 @@ def test_a_small_face_the_whole_frame_boxes_better_keeps_the_whole_frames_box():
     _, near_score = detector.closer(zoomed, whole)
     assert near_score < whole_score
     assert detector.box(zoomed) == whole
+
+
+def test_the_surround_reading_scores_the_frames_with_another_frames_surround(sim_data, shipped_model):
+    # The same frames, the faces kept and the surrounds swapped: the predicted monitor moves.
+    readings = surround.score(shipped_model, [sim_data / "captures" / "session-000"], seed=0)
+    filmed, swapped = readings["as filmed"], readings["surround swapped"]
+    assert set(filmed) == set(swapped) == {"monitor_mae", "brightness_corr", "colour_corr"}
+    assert all(np.isfinite(v) for v in [*filmed.values(), *swapped.values()])
+    assert filmed["monitor_mae"] != swapped["monitor_mae"]

@@ -8,6 +8,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import torch
 
@@ -42,6 +43,62 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
     assert set(manifest["parity"]) >= set(stages) - {"presence"}
     assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr", "code_error"}
     assert record["code"] == 1.0
+
+
+def a_face(frames: int, size: int) -> np.ndarray:
+    """68 keypoints of a face in the middle of a ``size``-pixel frame, the same in each of
+    ``frames``: the jaw a half circle from ear to ear, the brows a line above the eyes."""
+    points = np.zeros((68, 2), np.float32)
+    angles = np.linspace(np.pi, 0.0, 17)
+    centre, radius = size / 2, size / 5
+    points[:17] = np.stack([centre + radius * np.cos(angles), centre + radius * np.sin(angles)], 1)
+    points[17:27] = np.stack([np.linspace(centre - radius, centre + radius, 10), np.full(10, centre - radius / 2)], 1)
+    points[27:] = centre
+    return np.broadcast_to(points, (frames, 68, 2)).copy()
+
+
+def test_a_swapped_surround_keeps_each_face_and_shows_another_frames_light_round_it():
+    # Each frame's light is its own flat grey, so where a pixel came from reads off its value.
+    frames, resolution = 6, 32
+    images = np.stack([np.full((resolution, resolution, 3), 40 * (i + 1), np.uint8) for i in range(frames)])
+    masks = light_refit.face_masks(a_face(frames, 128), 128, resolution)
+    middle, corner = (resolution // 2, resolution // 2), (1, 1)
+    assert masks[0][middle] == 1.0 and masks[0][corner] == 0.0
+    swapped = light_refit.surround_swapped(images, masks, np.random.default_rng(0), 1.0)
+    assert [swapped[i][middle][0] for i in range(frames)] == [images[i][middle][0] for i in range(frames)]
+    surrounds = [swapped[i][corner][0] for i in range(frames)]
+    # Every frame's surround is another frame's, each frame's once.
+    assert sorted(surrounds) == sorted(images[:, 1, 1, 0])
+    assert sum(surrounds[i] != images[i, 1, 1, 0] for i in range(frames)) >= frames - 1
+    # A share of none leaves the frames as they are.
+    kept = light_refit.surround_swapped(images, masks, np.random.default_rng(0), 0.0)
+    assert np.array_equal(kept, images)
+
+
+def test_a_refit_gives_the_saved_network_its_new_light_decoder(sim_data, shipped_model, tmp_path):
+    # A model that fine-tuning can start from: the shipped one with its saved network.
+    torch.set_num_threads(2)
+    start = tmp_path / "start"
+    shutil.copytree(shipped_model, start)
+    original = network_from_model(shipped_model)
+    manifest = contract.read(shipped_model / "model.json")
+    net_cfg = model.NetConfig(
+        resolution=manifest["resolution"],
+        width=manifest["widths"][1] / model.PAPER_WIDTHS[1],
+        light_field=original.decoder.light_field is not None,
+    )
+    runs.save_network(original, net_cfg, start / "network.pt", {"run": "shipped"})
+    out = tmp_path / "refit"
+    light_refit.refit(start, sim_data, out, light_refit.FitSettings(steps=3, batch=8, swap_surround=1.0))
+    _, saved = runs.read_network(out / "network.pt")
+    refitted = network_from_model(out).state_dict()
+    before = original.state_dict()
+    decoder = [k for k in saved if k.startswith("light_decoder.")]
+    assert decoder and any(not torch.equal(saved[k], before[k]) for k in decoder)
+    for name, value in saved.items():
+        assert torch.equal(value, refitted[name] if name in decoder else before[name]), name
+    source = torch.load(out / "network.pt", weights_only=True)["source"]
+    assert source["run"] == "shipped" and source["light_refit"]["swap_surround"] == 1.0
 
 
 def test_the_code_term_measures_how_far_the_network_sees_two_lights_apart(sim_data, shipped_model):
