@@ -7,9 +7,10 @@
 //! - [`mottling`]: the colour part of the per-channel log gain (log gain less its
 //!   mean over the channels), less its smooth part (a box blur a quarter of the
 //!   face wide), as RMS in percent over the face's pixels of
-//!   [`MOTTLING_BLACK`] levels and up: blotchy skin; [`mottling_in_all`]
-//!   counts every pixel, and [`mottling_by_luma`] says which input brightness
-//!   it comes from.
+//!   [`MOTTLING_BLACK`] levels and up, read against the smooth part as an
+//!   8-bit output would show it: blotchy skin; [`mottling_in_all`] counts
+//!   every pixel, and [`mottling_by_luma`] says which input brightness it
+//!   comes from.
 //! - [`pumping`]: the 95th percentile of the frame-to-frame change of the face
 //!   region's mean (output minus input), in levels, leaving out cuts: brightness
 //!   that breathes while the input is steady.
@@ -38,6 +39,11 @@ pub trait Pixels {
     }
     /// R, G and B of pixel (x, y), in [0, 1] (not rounded).
     fn rgb(&self, x: usize, y: usize) -> [f64; 3];
+    /// Whether those are 8-bit samples themselves, as any RGB output rounds
+    /// them (not so for Y'CbCr, read in floating point from its samples).
+    fn is_8_bit_rgb(&self) -> bool {
+        true
+    }
 }
 
 impl Pixels for RgbImage {
@@ -131,6 +137,10 @@ impl<'a> View<'a> {
 }
 
 impl Pixels for View<'_> {
+    fn is_8_bit_rgb(&self) -> bool {
+        !self.is_yuv()
+    }
+
     fn size(&self) -> (usize, usize) {
         let (w, h) = (self.frame.width, self.frame.height);
         match self.reading {
@@ -479,9 +489,20 @@ pub fn mottling_by_luma(
 
 /// Per pixel of `face` (in frame pixels; its index in the image's pixels)
 /// whose input luma is `black` levels or more: the squares, summed over the
-/// channels, of the colour part of its per-channel log gain (the channel's
-/// less the mean of the three) less that part's smooth part (a box blur a
-/// quarter of the face wide, over all its pixels).
+/// channels, of the colour part (the channel's less the mean of the three) of
+/// its per-channel log gain less the smooth gain's (a box blur a quarter of
+/// the face wide, over all its pixels).
+///
+/// The smooth gain is read as the output would show it: applied to the input
+/// pixel and clipped to the 8-bit range, and in 8-bit RGB rounded, so that a
+/// sample within half a level of it departs by nothing. Rounding and clipping
+/// are what any output makes of any change, not the change: a gain that
+/// darkens a dark channel to a few levels makes half a level a large ratio
+/// there, and a saturated shadow's blue channel, 1 level taken below black,
+/// reads as black whatever the gain. The film clip darkened by one gain per
+/// channel, smooth everywhere, read 5.1-6.4% of mottling against the plain
+/// blur of its log gain, unrounded (`docs/real-footage.md`, "The measures").
+/// Y'CbCr is read as before: no rounding allowed for, every sample alike.
 fn mottling_terms(
     input: &impl Pixels,
     output: &impl Pixels,
@@ -497,19 +518,61 @@ fn mottling_terms(
         .flat_map(|y| (face.x..(face.x + face.size).min(w)).map(move |x| y * w + x))
         .filter(|&i| 255.0 * luma(input.rgb(i % w, i / w)) >= black)
         .collect();
-    let mut terms: Vec<(usize, f64)> = pixels.iter().map(|&i| (i, 0.0)).collect();
-    for gain in &gains {
-        // The colour part: this channel's gain less the mean gain of the three.
-        let colour: Vec<f64> = (0..w * h)
-            .map(|i| gain[i] - (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
+    let rgb_8_bit = output.is_8_bit_rgb();
+    // The smooth gain. In 8-bit RGB each sample is weighted by how precisely it
+    // reads the gain: its output's level squared (the log ratio's error from
+    // rounding falls as the level rises), and not at all where the output is
+    // clipped, so that a dark shadow's rounded and clipped blue channels do not
+    // pull their neighbours' smooth gain off theirs. Y'CbCr, read in floating
+    // point, is rounded in its own space: there every sample counts alike.
+    let smooth = [0, 1, 2].map(|c| {
+        let weight: Vec<f64> = (0..w * h)
+            .map(|i| {
+                let out = output.rgb(i % w, i / w)[c];
+                if !rgb_8_bit {
+                    1.0
+                } else if (0.5 / 255.0..254.5 / 255.0).contains(&out) {
+                    (out + LOG_EPSILON) * (out + LOG_EPSILON)
+                } else {
+                    0.0
+                }
+            })
             .collect();
-        let smooth = box_blur(&colour, w, h, radius);
-        for (i, t) in &mut terms {
-            let d = colour[*i] - smooth[*i];
-            *t += d * d;
-        }
-    }
-    terms
+        let weighted: Vec<f64> = gains[c].iter().zip(&weight).map(|(g, w)| g * w).collect();
+        let (sum, total) = (
+            box_blur(&weighted, w, h, radius),
+            box_blur(&weight, w, h, radius),
+        );
+        sum.iter()
+            .zip(total)
+            .zip(&gains[c])
+            .map(|((s, t), g)| if t > 0.0 { s / t } else { *g })
+            .collect::<Vec<f64>>()
+    });
+    // How far rounding to 8 bits may have moved an output sample, and the
+    // brightest it can show (Y'CbCr read in RGB may pass white; below black
+    // it reads as black).
+    let (rounding, white) = if rgb_8_bit {
+        (0.5 / 255.0, 1.0)
+    } else {
+        (0.0, f64::INFINITY)
+    };
+    pixels
+        .into_iter()
+        .map(|i| {
+            let (inp, out) = (input.rgb(i % w, i / w), output.rgb(i % w, i / w));
+            // Per channel, the output's log ratio to the nearest value that the
+            // smooth gain's output, clipped and rounded, could have become.
+            let departure = [0, 1, 2].map(|c| {
+                let expected =
+                    (smooth[c][i].exp() * (inp[c] + LOG_EPSILON) - LOG_EPSILON).clamp(0.0, white);
+                let nearest = out[c].clamp(expected - rounding, expected + rounding);
+                ((out[c] + LOG_EPSILON) / (nearest + LOG_EPSILON)).ln()
+            });
+            let mean = departure.iter().sum::<f64>() / 3.0;
+            (i, departure.iter().map(|d| (d - mean) * (d - mean)).sum())
+        })
+        .collect()
 }
 
 /// A change of the input's face-region mean, in levels, that counts as a cut.
@@ -670,11 +733,14 @@ mod tests {
             [0, 1, 2].map(|c| (p[c] as f64 * gain[c]).round().min(255.0) as u8)
         };
         let relit = image(w, h, warm);
-        // The collar's rounding alone is over the 2% bar; above black the
-        // same rounding is a fraction of it.
-        assert!(mottling_in_all(&input, &relit, face) > 2.0);
-        assert!(mottling(&input, &relit, face) < 0.6);
-        // Blotches on pixels just above the black still count.
+        // Read against the unrounded smooth gain, as the measure once did, the
+        // collar's rounding alone was over the 2% bar; now it is under half of
+        // it even counting the collar (a pure gain, which the measure's 2
+        // levels read as a little change on near-black pixels).
+        assert!(mottling_in_all(&input, &relit, face) < 1.0);
+        assert!(mottling(&input, &relit, face) < 0.5);
+        // Blotches on pixels just above the black still count, at twice the
+        // bar and more (less the half level that rounding may have made).
         let dim = image(w, h, |x, y| [level(x, y, 24) as u8; 3]);
         let blotched = image(w, h, |x, y| {
             let v = level(x, y, 24) as u8;
@@ -684,7 +750,48 @@ mod tests {
                 [v, v, v + 5]
             }
         });
-        assert!(mottling(&dim, &blotched, face) > 5.0);
+        assert!(mottling(&dim, &blotched, face) > 4.0);
+    }
+
+    #[test]
+    fn a_strong_smooth_darkening_of_dark_skin_is_not_mottling_and_blotches_on_it_are() {
+        // Dark, warm, textured skin (a dim film's face, its blue channel 4-15
+        // levels under a luma of about 50), each channel darkened by one gain
+        // (the element's gain, (v' + 2) = g (v + 2)) and rounded to 8 bits:
+        // perfectly smooth, yet its blue channel falls to a few levels, where
+        // half a level is a large ratio. Read against the unrounded smooth
+        // gain, as the measure once did, it mottled by 2.5%.
+        let (w, h) = (128, 128);
+        let face = Region {
+            x: 0,
+            y: 0,
+            size: 128,
+        };
+        // Skin's texture, irregular as a camera's is.
+        let texture = |x: usize, y: usize| (((x * 73_856_093) ^ (y * 19_349_663)) % 23) as f64;
+        let input = image(w, h, |x, y| {
+            let t = texture(x, y);
+            [70.0 + t, 45.0 + 0.7 * t, 4.0 + 0.5 * t].map(|v| v as u8)
+        });
+        let darken = |p: [u8; 3], gain: [f64; 3]| {
+            [0, 1, 2].map(|c| {
+                (gain[c] * (p[c] as f64 + 2.0) - 2.0)
+                    .round()
+                    .clamp(0.0, 255.0) as u8
+            })
+        };
+        let at = |x: usize, y: usize| {
+            let p = &input.data[3 * (y * w + x)..][..3];
+            [p[0], p[1], p[2]]
+        };
+        let smooth = image(w, h, |x, y| darken(at(x, y), [0.8, 0.69, 0.54]));
+        assert!(mottling(&input, &smooth, face) < 0.3);
+        // The same darkening in blotches of a tenth either way still counts.
+        let blotched = image(w, h, |x, y| {
+            let shift = if (x / 4 + y / 4) % 2 == 0 { 1.1 } else { 0.9 };
+            darken(at(x, y), [0.8 * shift, 0.69, 0.54 / shift])
+        });
+        assert!(mottling(&input, &blotched, face) > 5.0);
     }
 
     #[test]
