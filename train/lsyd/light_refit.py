@@ -83,6 +83,8 @@ def face_masks(keypoints: np.ndarray, size: int, resolution: int) -> np.ndarray:
     top = brows - FOREHEAD * (chin - brows)
     cx, cy = (left + right) / 2, (top + chin) / 2
     ax, ay = FACE_WIDTH_MARGIN * (right - left) / 2, (chin - top) / 2
+    # A face with no extent (keypoints all at one place) gets a one-pixel ellipse, not a NaN.
+    ax, ay = np.maximum(ax, 1.0), np.maximum(ay, 1.0)
     grid = np.arange(resolution) + 0.5
     dx = (grid[None, None, :] - cx[:, None, None]) / ax[:, None, None]
     dy = (grid[None, :, None] - cy[:, None, None]) / ay[:, None, None]
@@ -101,7 +103,8 @@ def surround_swapped(images: np.ndarray, masks: np.ndarray, rng: np.random.Gener
     surround (hair, clothes, room) of another of its frames, also drawn at random; the rest as
     they are. The surround then shows some other screen's light, as a real crop's collar, helmet
     or wall shows none, so a light decoder fitted on all of them can read the light only off the
-    face."""
+    face. The draw is a permutation, so about one frame a session keeps its own surround; it is
+    made once, before the fit, so each face is fitted over one surround."""
     other = rng.permutation(len(images))
     kept = rng.random(len(images)) >= share
     other[kept] = np.flatnonzero(kept)
@@ -233,8 +236,9 @@ def refit(model_dir: Path, data_root: Path, out: Path, settings: FitSettings, va
     net = network_from_model(model_dir)
     manifest = contract.read(model_dir / "model.json")
     resolution = manifest["resolution"]
-    scored = data.Heldout.load(validation or data_root / "validation")
-    record = fit(net, data_root, scored, resolution, settings)
+    scored_on = validation or data_root / "validation"
+    scored = data.Heldout.load(scored_on)
+    record = {**fit(net, data_root, scored, resolution, settings), "validation": str(scored_on)}
 
     if out.exists():
         shutil.rmtree(out)

@@ -42,6 +42,8 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
     assert "heldout" not in manifest["metrics"]
     assert set(manifest["parity"]) >= set(stages) - {"presence"}
     assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr", "code_error"}
+    # The record names the set it was scored on, as --validation may choose another.
+    assert manifest["training"]["light_refit"]["validation"] == str(sim_data / "validation")
     assert record["code"] == 1.0
 
 

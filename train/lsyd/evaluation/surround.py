@@ -26,7 +26,8 @@ from .. import contract, data, light_refit
 from ..export import network_from_model
 from . import ROOT
 
-# The surround of every frame is swapped in the second reading.
+# The share of frames whose surround is swapped in the second reading: all of them (a permutation,
+# so about one frame a session keeps its own).
 ALL = 1.0
 
 
@@ -45,8 +46,7 @@ def score(model_dir: Path, sessions: list[Path], seed: int) -> dict[str, dict[st
     filmed, swapped, lights = [], [], []
     for s in sessions:
         images, lit = data.session_frames(s, resolution)
-        size = data.Capture.load(s).face.shape[1]
-        masks = light_refit.face_masks(np.load(s / "keypoints.npy"), size, resolution)
+        masks = light_refit.session_face_masks(s, resolution)
         filmed.append(predicted_monitors(net, images))
         swapped.append(predicted_monitors(net, light_refit.surround_swapped(images, masks, rng, ALL)))
         lights.append(lit)
