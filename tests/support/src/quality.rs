@@ -737,11 +737,7 @@ mod tests {
     #[test]
     fn rounding_a_smooth_change_on_near_black_pixels_is_not_mottling() {
         let (w, h) = (128, 128);
-        let face = Region {
-            x: 0,
-            y: 0,
-            size: 128,
-        };
+        let face = whole(128);
         // A textured face whose lower three eighths are a near-black collar, given
         // a smooth warm change and rounded to 8 bits, as any output is.
         let level = |x: usize, y: usize, base: usize| (base + (x * 7 + y * 13) % 11) as f64;
@@ -779,6 +775,11 @@ mod tests {
         assert!(mottling(&dim, &blotched, face) > 4.0);
     }
 
+    /// The whole of a `size` × `size` image as the face region.
+    fn whole(size: usize) -> Region {
+        Region { x: 0, y: 0, size }
+    }
+
     #[test]
     fn a_strong_smooth_darkening_of_dark_skin_is_not_mottling_and_blotches_on_it_are() {
         // Dark, warm, textured skin (a dim film's face, its blue channel 4-15
@@ -788,11 +789,7 @@ mod tests {
         // half a level is a large ratio. Read against the unrounded smooth
         // gain, as the measure once did, it mottled by 2.5%.
         let (w, h) = (128, 128);
-        let face = Region {
-            x: 0,
-            y: 0,
-            size: 128,
-        };
+        let face = whole(128);
         // Skin's texture, irregular as a camera's is.
         let texture = |x: usize, y: usize| (((x * 73_856_093) ^ (y * 19_349_663)) % 23) as f64;
         let input = image(w, h, |x, y| {
@@ -806,16 +803,12 @@ mod tests {
                     .clamp(0.0, 255.0) as u8
             })
         };
-        let at = |x: usize, y: usize| {
-            let p = &input.data[3 * (y * w + x)..][..3];
-            [p[0], p[1], p[2]]
-        };
-        let smooth = image(w, h, |x, y| darken(at(x, y), [0.8, 0.69, 0.54]));
+        let smooth = image(w, h, |x, y| darken(input.pixel(x, y), [0.8, 0.69, 0.54]));
         assert!(mottling(&input, &smooth, face) < 0.3);
         // The same darkening in blotches of a tenth either way still counts.
         let blotched = image(w, h, |x, y| {
             let shift = if (x / 4 + y / 4) % 2 == 0 { 1.1 } else { 0.9 };
-            darken(at(x, y), [0.8 * shift, 0.69, 0.54 / shift])
+            darken(input.pixel(x, y), [0.8 * shift, 0.69, 0.54 / shift])
         });
         assert!(mottling(&input, &blotched, face) > 5.0);
     }
