@@ -113,12 +113,16 @@ def surround_swapped(images: np.ndarray, masks: np.ndarray, rng: np.random.Gener
 
 
 def agreement(pred: np.ndarray, true: np.ndarray) -> dict[str, float]:
-    """How a predicted monitor follows the true one over frames: MAE, and the correlation of
-    brightness and of colour (blue minus red) of their means, as the model card measures them."""
+    """How a predicted monitor follows the true one over frames: MAE, the correlation of
+    brightness and of colour (blue minus red) of their means, as the model card measures them,
+    and the brightness slope: the least-squares slope of the predicted mean brightness against
+    the true one (1: it follows the screen's changes in full; near 0: it guesses about the same
+    light whatever the screen shows, however well correlated)."""
     p, t = pred.mean(axis=(2, 3)), true.mean(axis=(2, 3))
     return {
         "monitor_mae": float(np.abs(pred - true).mean()),
         "brightness_corr": float(np.corrcoef(p.mean(1), t.mean(1))[0, 1]),
+        "brightness_slope": float(np.polyfit(t.mean(1), p.mean(1), 1)[0]),
         "colour_corr": float(np.corrcoef(p[:, 2] - p[:, 0], t[:, 2] - t[:, 0])[0, 1]),
     }
 
@@ -135,7 +139,10 @@ def frames_and_lights(held: data.Heldout, resolution: int) -> tuple[np.ndarray, 
 class FitSettings:
     """How the light decoder learns: steps of Adam at ``lr`` with cosine decay to a tenth, over
     batches of ``batch`` frames, the monitor loss's mean-colour term at ``colour`` and the
-    light-code term at ``code``."""
+    light-code term at ``code``. With ``members`` above 1, that many fits from the same start,
+    seeded ``seed``, ``seed + 1``, ..., are averaged weight by weight (a "model soup", Wortsman
+    et al. 2022): fine-tuned from one start, their weights lie in one basin, and the average
+    keeps their accuracy while its guess on faces unlike the training's is no single fit's."""
 
     steps: int = 4000
     batch: int = 64
@@ -144,6 +151,7 @@ class FitSettings:
     code: float = 0.0
     seed: int = 0
     swap_surround: float = 0.0  # the share of frames fitted on with another frame's surround
+    members: int = 1
 
 
 class CodeDistance:
@@ -162,47 +170,36 @@ class CodeDistance:
         return (((self.encode(pred) - target) / self.spread) ** 2).mean()
 
 
-def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolution: int, settings: FitSettings) -> dict:
-    """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
-    captured frame against the frame's monitor light; returns the fit's record, with the
-    ``validation`` set's scores before and after. Its batches are drawn from their own generator,
-    seeded by ``settings.seed``."""
-    sessions = data.capture_dirs(data_root / "captures")
-    t0 = time.time()
+def training_features(
+    net: model.LcfnNet, sessions: list[Path], resolution: int, swap_surround: float, seed: int
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """The light decoder's input for every frame of ``sessions`` (a ``swap_surround`` share of
+    them over another frame's surround, drawn from a generator seeded by ``seed``) and, per
+    frame, the monitor light."""
     frames = [data.session_frames(s, resolution) for s in sessions]
-    if settings.swap_surround:
-        rng = np.random.default_rng(settings.seed)
+    if swap_surround:
+        rng = np.random.default_rng(seed)
         frames = [
-            (surround_swapped(images, session_face_masks(s, resolution), rng, settings.swap_surround), lights)
+            (surround_swapped(images, session_face_masks(s, resolution), rng, swap_surround), lights)
             for s, (images, lights) in zip(sessions, frames)
         ]
     images = np.concatenate([f[0] for f in frames])
-    lights = torch.from_numpy(np.concatenate([f[1] for f in frames]))
-    features = pooled_features(net, images)
-    val_images, val_lights = frames_and_lights(validation, resolution)
-    val_features = pooled_features(net, val_images)
-    print(f"{len(images)} frames of {len(sessions)} sessions encoded in {time.time() - t0:.0f} s")
+    return pooled_features(net, images), torch.from_numpy(np.concatenate([f[1] for f in frames]))
 
-    fuse = net.light_decoder.fuse
-    # Only the light decoder learns; the code term's gradient passes through the light encoder
-    # without collecting there.
-    for p in net.parameters():
-        p.requires_grad_(False)
-    for p in fuse.parameters():
-        p.requires_grad_(True)
-    code_distance = CodeDistance(net, lights)
 
-    def score_validation() -> dict[str, float]:
-        with torch.no_grad():
-            pred = fuse(val_features)
-            code_error = float(code_distance(pred, torch.from_numpy(val_lights)))
-            return {**agreement(pred.numpy(), val_lights), "code_error": code_error}
-
-    before = score_validation()
+def fit_fuse(
+    fuse: torch.nn.Module,
+    features: torch.Tensor,
+    lights: torch.Tensor,
+    settings: FitSettings,
+    seed: int,
+    code_distance: CodeDistance,
+) -> None:
+    """Trains ``fuse`` in place on ``features`` against ``lights``, its batches drawn from a
+    generator seeded by ``seed + 1``."""
     opt = torch.optim.Adam(fuse.parameters(), lr=settings.lr)
-    sampler = torch.Generator().manual_seed(settings.seed + 1)
-    start = time.time()
-    for step in tqdm(range(settings.steps), desc="light decoder", unit="step"):
+    sampler = torch.Generator().manual_seed(seed + 1)
+    for step in tqdm(range(settings.steps), desc=f"light decoder, seed {seed}", unit="step"):
         # Cosine decay to a tenth, as in training.
         for g in opt.param_groups:
             g["lr"] = settings.lr * (0.1 + 0.9 * 0.5 * (1.0 + np.cos(np.pi * step / settings.steps)))
@@ -214,15 +211,61 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
         opt.zero_grad(set_to_none=True)
         loss.backward()
         opt.step()
+
+
+def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolution: int, settings: FitSettings) -> dict:
+    """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
+    captured frame against the frame's monitor light; returns the fit's record, with the
+    ``validation`` set's scores before and after (and each member's, where ``settings.members``
+    fits are averaged)."""
+    sessions = data.capture_dirs(data_root / "captures")
+    val_images, val_lights = frames_and_lights(validation, resolution)
+    val_features = pooled_features(net, val_images)
+
+    fuse = net.light_decoder.fuse
+    # Only the light decoder learns; the code term's gradient passes through the light encoder
+    # without collecting there.
+    for p in net.parameters():
+        p.requires_grad_(False)
+    for p in fuse.parameters():
+        p.requires_grad_(True)
+
+    def score_validation() -> dict[str, float]:
+        with torch.no_grad():
+            pred = fuse(val_features)
+            code_error = float(code_distance(pred, torch.from_numpy(val_lights)))
+            return {**agreement(pred.numpy(), val_lights), "code_error": code_error}
+
+    def encoded(seed: int) -> tuple[torch.Tensor, torch.Tensor]:
+        t0 = time.time()
+        features, lights = training_features(net, sessions, resolution, settings.swap_surround, seed)
+        print(f"{len(features)} frames of {len(sessions)} sessions encoded in {time.time() - t0:.0f} s")
+        return features, lights
+
+    features, lights = encoded(settings.seed)
+    code_distance = CodeDistance(net, lights)
+    before = score_validation()
+    start_weights = {k: v.clone() for k, v in fuse.state_dict().items()}
+    start = time.time()
+    members, fitted = [], []
+    for seed in range(settings.seed, settings.seed + settings.members):
+        if seed != settings.seed and settings.swap_surround:
+            features, _ = encoded(seed)  # each member's own draw of surrounds; the lights are the same
+        fuse.load_state_dict(start_weights)
+        fit_fuse(fuse, features, lights, settings, seed, code_distance)
+        fitted.append({k: v.clone() for k, v in fuse.state_dict().items()})
+        members.append({"seed": seed, "validation_after": score_validation()})
+    fuse.load_state_dict({k: torch.stack([w[k] for w in fitted]).mean(dim=0) for k in start_weights})
     return {
         "stage": "light_decoder",
         "encoder": "frozen",
-        "frames": len(images),
+        "frames": len(features),
         "sessions": len(sessions),
         **dataclasses.asdict(settings),
         "seconds": round(time.time() - start, 1),
         "validation_before": before,
         "validation_after": score_validation(),
+        **({"member_scores": members} if settings.members > 1 else {}),
     }
 
 
@@ -340,6 +383,12 @@ def main() -> None:
     p.add_argument("--code", type=float, default=0.0, help="weight of the light code's standardised squared error")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument(
+        "--members",
+        type=int,
+        default=1,
+        help="fits from the same start, seeded SEED, SEED+1, ..., averaged weight by weight",
+    )
+    p.add_argument(
         "--swap-surround",
         type=float,
         default=0.0,
@@ -350,8 +399,17 @@ def main() -> None:
     if a.threads:
         torch.set_num_threads(a.threads)
     settings = FitSettings(
-        steps=a.steps, batch=a.batch, lr=a.lr, colour=a.colour, code=a.code, seed=a.seed, swap_surround=a.swap_surround
+        steps=a.steps,
+        batch=a.batch,
+        lr=a.lr,
+        colour=a.colour,
+        code=a.code,
+        seed=a.seed,
+        swap_surround=a.swap_surround,
+        members=a.members,
     )
+    if a.members < 1:
+        raise SystemExit(f"--members {a.members}: at least one fit is needed")
     if a.run and a.validation:
         raise SystemExit("--validation is for --model; a run is scored on DATA/validation")
     if a.model:

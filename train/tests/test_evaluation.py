@@ -253,6 +253,6 @@ def test_the_surround_reading_scores_the_frames_with_another_frames_surround(sim
     # The same frames, the faces kept and the surrounds swapped: the predicted monitor moves.
     readings = surround.score(shipped_model, [sim_data / "captures" / "session-000"], seed=0)
     filmed, swapped = readings["as filmed"], readings["surround swapped"]
-    assert set(filmed) == set(swapped) == {"monitor_mae", "brightness_corr", "colour_corr"}
+    assert set(filmed) == set(swapped) == {"monitor_mae", "brightness_corr", "brightness_slope", "colour_corr"}
     assert all(np.isfinite(v) for v in [*filmed.values(), *swapped.values()])
     assert filmed["monitor_mae"] != swapped["monitor_mae"]

@@ -2,6 +2,7 @@
 writes a model whose other stages are the original's, byte for byte; fitted after training, it
 completes a run trained without light prediction."""
 
+import dataclasses
 import json
 import shutil
 import subprocess
@@ -41,7 +42,13 @@ def test_a_refit_model_changes_its_light_decoder_alone(sim_data, shipped_model, 
     # The old light decoder's held-out figures do not travel with the new one.
     assert "heldout" not in manifest["metrics"]
     assert set(manifest["parity"]) >= set(stages) - {"presence"}
-    assert set(record["validation_after"]) == {"monitor_mae", "brightness_corr", "colour_corr", "code_error"}
+    assert set(record["validation_after"]) == {
+        "monitor_mae",
+        "brightness_corr",
+        "brightness_slope",
+        "colour_corr",
+        "code_error",
+    }
     # The record names the set it was scored on, as --validation may choose another.
     assert manifest["training"]["light_refit"]["validation"] == str(sim_data / "validation")
     assert record["code"] == 1.0
@@ -101,6 +108,26 @@ def test_a_refit_gives_the_saved_network_its_new_light_decoder(sim_data, shipped
         assert torch.equal(value, refitted[name] if name in decoder else before[name]), name
     source = torch.load(out / "network.pt", weights_only=True)["source"]
     assert source["run"] == "shipped" and source["light_refit"]["swap_surround"] == 1.0
+
+
+def test_fits_averaged_are_the_weight_average_of_each_fit_alone(sim_data, shipped_model):
+    torch.set_num_threads(2)
+    validation = data.Heldout.load(sim_data / "validation")
+    resolution = contract.read(shipped_model / "model.json")["resolution"]
+
+    def fitted(settings: light_refit.FitSettings) -> tuple[dict, dict]:
+        net = network_from_model(shipped_model)
+        record = light_refit.fit(net, sim_data, validation, resolution, settings)
+        return net.light_decoder.fuse.state_dict(), record
+
+    settings = light_refit.FitSettings(steps=3, batch=8, swap_surround=1.0)
+    alone = [fitted(dataclasses.replace(settings, seed=seed))[0] for seed in (4, 5)]
+    averaged, record = fitted(dataclasses.replace(settings, seed=4, members=2))
+    assert any(not torch.equal(alone[0][k], alone[1][k]) for k in averaged)
+    for name, value in averaged.items():
+        assert torch.allclose(value, (alone[0][name] + alone[1][name]) / 2, atol=1e-7), name
+    assert [m["seed"] for m in record["member_scores"]] == [4, 5]
+    assert record["validation_after"] != record["member_scores"][0]["validation_after"]
 
 
 def test_the_code_term_measures_how_far_the_network_sees_two_lights_apart(sim_data, shipped_model):

@@ -5,11 +5,13 @@
 
 On the desk sessions of the simulated people no model trained on (``DATA/unseen-captures``), the
 predicted monitor of each frame is scored against the screen it faced (``lsyd.light_refit``'s
-agreement: MAE in linear light, and the correlation over the frames of its mean's brightness and
-colour), twice: the frames as filmed, and each frame's face over the surround (hair, clothes,
-room) of another frame of its session (``light_refit.surround_swapped``, all of them). The
-surround then shows another screen's light, as a real crop's collar, helmet or wall shows no
-screen's. A decoder that reads the face keeps its score; one that reads the shirt loses it.
+agreement: MAE in linear light, the correlation over the frames of its mean's brightness and
+colour, and the slope of its brightness against the screen's), twice: the frames as filmed, and
+each frame's face over the surround (hair, clothes, room) of another frame of its session
+(``light_refit.surround_swapped``, all of them). The surround then shows another screen's light,
+as a real crop's collar, helmet or wall shows no screen's. A decoder that reads the face keeps
+its score; one that reads the shirt loses it. A guess that hardly moves with the screen (a low
+slope) can still correlate with it: the slope says how much of the light it would take away.
 Writes ``OUT/results.json`` and ``OUT/table.md``.
 """
 
@@ -74,15 +76,19 @@ def main() -> None:
     lines = [
         f"The predicted monitor against the screen on {len(sessions)} unseen people's desk sessions "
         f"(`python -m lsyd.evaluation.surround --models {names}`): MAE (linear light) / brightness "
-        "correlation / colour correlation, with the frames as filmed and with each face over another "
-        "frame's surround.",
+        "correlation / brightness slope (1: the guess follows the screen's changes in full) / colour "
+        "correlation, with the frames as filmed and with each face over another frame's surround.",
         "",
         "| model | as filmed | surround swapped |",
         "|---|---|---|",
     ]
     for name, readings in results.items():
         cells = [
-            f"{r['monitor_mae']:.3f} / {r['brightness_corr']:.2f} / {r['colour_corr']:.2f}" for r in readings.values()
+            " / ".join(
+                f"{r[k]:.{3 if k == 'monitor_mae' else 2}f}"
+                for k in ("monitor_mae", "brightness_corr", "brightness_slope", "colour_corr")
+            )
+            for r in readings.values()
         ]
         lines.append(f"| {name} | {' | '.join(cells)} |")
     (a.out / "table.md").write_text("\n".join(lines) + "\n")
