@@ -141,8 +141,9 @@ class FitSettings:
     batches of ``batch`` frames, the monitor loss's mean-colour term at ``colour`` and the
     light-code term at ``code``. With ``members`` above 1, that many fits from the same start,
     seeded ``seed``, ``seed + 1``, ..., are averaged weight by weight (a "model soup", Wortsman
-    et al. 2022): fine-tuned from one start, their weights lie in one basin, and the average
-    keeps their accuracy while its guess on faces unlike the training's is no single fit's."""
+    et al. 2022): fitted from one start, their weights can be averaged into one decoder of the
+    same shape, whose guess on faces unlike the training's varies less with the seed than a
+    single fit's (docs/targets.md measures both)."""
 
     steps: int = 4000
     batch: int = 64
@@ -152,6 +153,10 @@ class FitSettings:
     seed: int = 0
     swap_surround: float = 0.0  # the share of frames fitted on with another frame's surround
     members: int = 1
+
+    def __post_init__(self):
+        if self.members < 1:
+            raise ValueError(f"members={self.members}: at least one fit is needed")
 
 
 class CodeDistance:
@@ -217,7 +222,7 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
     """Trains ``net``'s light decoder, in place, on its frozen encoder's features of every
     captured frame against the frame's monitor light; returns the fit's record, with the
     ``validation`` set's scores before and after (and each member's, where ``settings.members``
-    fits are averaged)."""
+    fits are averaged; its ``seconds`` are then all of theirs, re-encodings included)."""
     sessions = data.capture_dirs(data_root / "captures")
     val_images, val_lights = frames_and_lights(validation, resolution)
     val_features = pooled_features(net, val_images)
@@ -247,14 +252,14 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
     before = score_validation()
     start_weights = {k: v.clone() for k, v in fuse.state_dict().items()}
     start = time.time()
-    members, fitted = [], []
+    member_scores, fitted = [], []
     for seed in range(settings.seed, settings.seed + settings.members):
         if seed != settings.seed and settings.swap_surround:
             features, _ = encoded(seed)  # each member's own draw of surrounds; the lights are the same
         fuse.load_state_dict(start_weights)
         fit_fuse(fuse, features, lights, settings, seed, code_distance)
         fitted.append({k: v.clone() for k, v in fuse.state_dict().items()})
-        members.append({"seed": seed, "validation_after": score_validation()})
+        member_scores.append({"seed": seed, "validation_after": score_validation()})
     fuse.load_state_dict({k: torch.stack([w[k] for w in fitted]).mean(dim=0) for k in start_weights})
     return {
         "stage": "light_decoder",
@@ -265,7 +270,7 @@ def fit(net: model.LcfnNet, data_root: Path, validation: data.Heldout, resolutio
         "seconds": round(time.time() - start, 1),
         "validation_before": before,
         "validation_after": score_validation(),
-        **({"member_scores": members} if settings.members > 1 else {}),
+        **({"member_scores": member_scores} if settings.members > 1 else {}),
     }
 
 
@@ -398,6 +403,8 @@ def main() -> None:
     a = p.parse_args()
     if a.threads:
         torch.set_num_threads(a.threads)
+    if a.members < 1:
+        raise SystemExit(f"--members {a.members}: at least one fit is needed")
     settings = FitSettings(
         steps=a.steps,
         batch=a.batch,
@@ -408,8 +415,6 @@ def main() -> None:
         swap_surround=a.swap_surround,
         members=a.members,
     )
-    if a.members < 1:
-        raise SystemExit(f"--members {a.members}: at least one fit is needed")
     if a.run and a.validation:
         raise SystemExit("--validation is for --model; a run is scored on DATA/validation")
     if a.model:

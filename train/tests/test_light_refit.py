@@ -126,8 +126,12 @@ def test_fits_averaged_are_the_weight_average_of_each_fit_alone(sim_data, shippe
     assert any(not torch.equal(alone[0][k], alone[1][k]) for k in averaged)
     for name, value in averaged.items():
         assert torch.allclose(value, (alone[0][name] + alone[1][name]) / 2, atol=1e-7), name
+    # The record scores the average, and each member apart; a single fit's has no members.
     assert [m["seed"] for m in record["member_scores"]] == [4, 5]
-    assert record["validation_after"] != record["member_scores"][0]["validation_after"]
+    assert all(record["validation_after"] != m["validation_after"] for m in record["member_scores"])
+    assert "member_scores" not in fitted(settings)[1]
+    with pytest.raises(ValueError, match="at least one fit"):
+        light_refit.FitSettings(members=0)
 
 
 def test_the_code_term_measures_how_far_the_network_sees_two_lights_apart(sim_data, shipped_model):

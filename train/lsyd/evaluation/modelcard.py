@@ -183,7 +183,9 @@ def configuration_lines(m: dict, cfg: TrainConfig | None) -> list[str]:
         before, after = refit["validation_before"], refit["validation_after"]
         how = "fitted after training" if fitted_after else "refitted"
         lines.append(
-            f"- Light decoder {how} on the frozen encoder (`lsyd.light_refit`): {refit['steps']} steps of batch "
+            f"- Light decoder {how} on the frozen encoder (`lsyd.light_refit`): "
+            + (f"the weight average of {refit['members']} fits, each " if refit.get("members", 1) > 1 else "")
+            + f"{refit['steps']} steps of batch "
             f"{refit['batch']} over the {refit['frames']:,} captured frames' features, Adam (lr {refit['lr']:g}, "
             f"cosine to a tenth), monitor colour x{refit['colour']:g}"
             + (f", light code x{refit['code']:g}" if refit.get("code") else "")

@@ -10,8 +10,8 @@ colour, and the slope of its brightness against the screen's), twice: the frames
 each frame's face over the surround (hair, clothes, room) of another frame of its session
 (``light_refit.surround_swapped``, all of them). The surround then shows another screen's light,
 as a real crop's collar, helmet or wall shows no screen's. A decoder that reads the face keeps
-its score; one that reads the shirt loses it. A guess that hardly moves with the screen (a low
-slope) can still correlate with it: the slope says how much of the light it would take away.
+its score; one that reads the shirt loses it. A guess can correlate with the screen and yet
+hardly move with it: the slope says how much of the screen's change the guess follows.
 Writes ``OUT/results.json`` and ``OUT/table.md``.
 """
 
@@ -84,10 +84,8 @@ def main() -> None:
     ]
     for name, readings in results.items():
         cells = [
-            " / ".join(
-                f"{r[k]:.{3 if k == 'monitor_mae' else 2}f}"
-                for k in ("monitor_mae", "brightness_corr", "brightness_slope", "colour_corr")
-            )
+            f"{r['monitor_mae']:.3f} / {r['brightness_corr']:.2f} / {r['brightness_slope']:.2f} / "
+            f"{r['colour_corr']:.2f}"
             for r in readings.values()
         ]
         lines.append(f"| {name} | {' | '.join(cells)} |")
