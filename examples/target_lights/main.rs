@@ -6,7 +6,7 @@
 //! ```text
 //! cargo run --example target_lights -- sheet results/targets/presets.png
 //! cargo run --example target_lights -- projection results/targets/environment.png
-//! cargo run --example target_lights -- measure [--frames 60] [--model models/default]
+//! cargo run --example target_lights -- measure [--frames 60] [--model models/default] [--paste-alone]
 //! cargo run --example target_lights -- timing
 //! cargo run --release --example target_lights -- direction [--frames 30] [--model models/starter] \
 //!     [--out results/direction]
@@ -28,15 +28,17 @@ use deskstage::monitor::RgbImage;
 use deskstage::subject::State;
 use gst::prelude::*;
 use gst_check::Harness;
+use gstlsydrelight::engine::contract::Manifest;
 use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS, Light, linear_to_srgb_byte};
 use gstlsydrelight::targets::{Panorama, Preset, View};
 use lsydrelight_testkit::{
     checkout, default_model,
     element::{element, stat},
-    footage::{PORTRAIT_FACE, decode},
+    footage::{Format, PORTRAIT_FACE, Relit, decode, denoised, packed, read_y4m, relight_with},
     init,
+    oracle::truth_pasted,
     person::render_person,
-    recording::score_recording,
+    recording::{face_region_rmse, score_recording},
     video::{FRAME, buffer, frame_time, rgb_caps, to_rgb},
 };
 
@@ -66,6 +68,11 @@ enum Command {
         /// `dome` (the 180-degree field the light code stands for).
         #[arg(long, default_value = "desk", value_parser = Stage::from_name)]
         stage: Stage,
+        /// Also the error of the paste alone: each frame's change taken from the
+        /// truth's own crop in place of the network's output
+        /// (`lsydrelight_testkit::oracle`), pasted where the element relit.
+        #[arg(long)]
+        paste_alone: bool,
     },
     /// What target changes and video targets cost.
     Timing,
@@ -108,7 +115,13 @@ fn main() -> Result<(), String> {
             frames,
             model,
             stage,
-        } => measure(frames, &model.unwrap_or_else(default_model), stage),
+            paste_alone,
+        } => measure(
+            frames,
+            &model.unwrap_or_else(default_model),
+            stage,
+            paste_alone,
+        ),
         Command::Timing => timing(),
         Command::Direction {
             frames,
@@ -421,11 +434,27 @@ fn call_recording(frames: usize, stage: Stage) -> Result<(PathBuf, Vec<Measured>
 }
 
 /// Relights the simulator's `call` recording to every preset and to the outdoor
-/// map at four yaws, and scores each against the exact render under that light.
-fn measure(frames: usize, model: &Path, stage: Stage) -> Result<(), String> {
+/// map at four yaws, and scores each against the exact render under that light;
+/// with `paste_alone`, also the paste of the truth's own change where the
+/// element relit (what the element would score with a perfect network).
+fn measure(frames: usize, model: &Path, stage: Stage, paste_alone: bool) -> Result<(), String> {
     let (dir, targets) = call_recording(frames, stage)?;
-    println!("| target | face-region RMSE | input's RMSE | ms/frame (under load) |");
-    println!("|---|---|---|---|");
+    let paste = paste_alone
+        .then(|| PasteAlone::new(&dir, frames, model))
+        .transpose()?;
+    let extra = if paste.is_some() {
+        (
+            " paste alone's RMSE | ratios to the input's (element, paste alone) |",
+            "---|---|",
+        )
+    } else {
+        ("", "")
+    };
+    println!(
+        "| target | face-region RMSE | input's RMSE | ms/frame (under load) |{}",
+        extra.0
+    );
+    println!("|---|---|---|---|{}", extra.1);
     let model_str = model.to_string_lossy().into_owned();
     let shipped = ["studio", "sunset", "left-key"].map(|n| (n.to_string(), Vec::new()));
     let all = shipped
@@ -435,12 +464,79 @@ fn measure(frames: usize, model: &Path, stage: Stage) -> Result<(), String> {
         let mut p: Vec<(&str, &str)> = vec![("model-location", &model_str)];
         p.extend(props.iter().map(|(k, v)| (k.as_str(), v.as_str())));
         let s = score_recording(&dir, &name, true, &p, false)?;
+        let columns = match &paste {
+            Some(paste) => {
+                let rmse = paste.rmse(&dir, &name)?;
+                format!(
+                    " {rmse:.2} | {:.2} / {:.2} |",
+                    s.rmse_region / s.input_rmse_region,
+                    rmse / s.input_rmse_region
+                )
+            }
+            None => String::new(),
+        };
         println!(
-            "| {name} | {:.2} | {:.2} | {:.0} |",
+            "| {name} | {:.2} | {:.2} | {:.0} |{columns}",
             s.rmse_region, s.input_rmse_region, s.ms_per_frame
         );
     }
     Ok(())
+}
+
+/// The recording's face frames as the element's denoising leaves them, and
+/// where the element relits them: what the paste of each target's truth needs.
+struct PasteAlone {
+    denoised: Vec<RgbImage>,
+    relit: Vec<Option<Relit>>,
+    resolution: usize,
+}
+
+impl PasteAlone {
+    /// Where and how strongly the element with `model` relits the recording's
+    /// face, and its frames denoised as the element denoises them before its
+    /// paste. The face's box, fade and strength come from face following alone,
+    /// not from the target or the monitor, so one run serves every target.
+    fn new(dir: &Path, frames: usize, model: &Path) -> Result<PasteAlone, String> {
+        init();
+        let input = read_y4m(&dir.join("face.y4m"), frames)?;
+        let relit: Vec<_> = relight_with(
+            &input,
+            model,
+            &format!(
+                "target-location=\"{}\"",
+                dir.join("target-studio.png").display()
+            ),
+            Format::Rgb,
+        )?
+        .into_iter()
+        .map(|(_, relit)| relit)
+        .collect();
+        let denoised = denoised(&input.iter().map(packed).collect::<Vec<_>>(), &relit)?
+            .into_iter()
+            .zip(&input)
+            .map(|(mut frame, original)| RgbImage {
+                width: original.width,
+                height: original.height,
+                data: frame.planes.swap_remove(0).0,
+            })
+            .collect();
+        let resolution = Manifest::load(model).map_err(|e| e.to_string())?.resolution;
+        Ok(PasteAlone {
+            denoised,
+            relit,
+            resolution,
+        })
+    }
+
+    /// The face-region RMSE of the truth under `target` pasted onto the input.
+    fn rmse(&self, dir: &Path, target: &str) -> Result<f64, String> {
+        let truth = read_y4m(
+            &dir.join(format!("truth-{target}.y4m")),
+            self.denoised.len(),
+        )?;
+        let pasted = truth_pasted(&self.denoised, &truth, &self.relit, self.resolution)?;
+        Ok(face_region_rmse(&pasted, &truth))
+    }
 }
 
 /// What target changes and video targets cost.

@@ -26,6 +26,7 @@ pub mod direction;
 pub mod element;
 pub mod flow;
 pub mod footage;
+pub mod oracle;
 pub mod person;
 pub mod quality;
 pub mod recording;

@@ -164,6 +164,24 @@ fn structure_json(s: &gst::StructureRef) -> serde_json::Value {
     serde_json::Value::Object(m)
 }
 
+/// The region the scores call the face's: the frame's centred square (x, y, side).
+fn face_square(frame: &RgbImage) -> (usize, usize, usize) {
+    let size = frame.width.min(frame.height);
+    ((frame.width - size) / 2, (frame.height - size) / 2, size)
+}
+
+/// The RMSE of `frames` against `truth`, frame by frame, over the region
+/// [`Score::rmse_region`] reads: how frames made other than by the element
+/// compare with its score.
+pub fn face_region_rmse(frames: &[RgbImage], truth: &[RgbImage]) -> f64 {
+    let (err, n) = frames
+        .iter()
+        .zip(truth)
+        .map(|(frame, truth)| sq_err(frame, truth, Some(face_square(frame))))
+        .fold((0.0, 0), |(e, n), (fe, fn_)| (e + fe, n + fn_));
+    (err / n as f64).sqrt()
+}
+
 fn sq_err(a: &RgbImage, b: &RgbImage, region: Option<(usize, usize, usize)>) -> (f64, usize) {
     let (x0, y0, size) = region.unwrap_or((0, 0, usize::MAX));
     let mut sum = 0.0;
@@ -473,8 +491,7 @@ fn score_pipeline(
             (_, _, Ok(None)) => break Err("more relit frames than input frames".into()),
             (_, Err(e), _) | (_, _, Err(e)) => break Err(e.to_string()),
         };
-        let size = out.width.min(out.height);
-        let face = ((out.width - size) / 2, (out.height - size) / 2, size);
+        let face = face_square(&out);
         let (e, n) = sq_err(&out, &gt, Some(face));
         region_err += e;
         region_n += n;
