@@ -34,7 +34,9 @@ use gstlsydrelight::targets::{Panorama, Preset, View};
 use lsydrelight_testkit::{
     checkout, default_model,
     element::{element, stat},
-    footage::{Format, PORTRAIT_FACE, Relit, decode, denoised, packed, read_y4m, relight_with},
+    footage::{
+        Format, PORTRAIT_FACE, Relit, decode, denoised, packed, read_y4m, relight_with, unpacked,
+    },
     init,
     oracle::truth_pasted,
     person::render_person,
@@ -513,12 +515,7 @@ impl PasteAlone {
         .collect();
         let denoised = denoised(&input.iter().map(packed).collect::<Vec<_>>(), &relit)?
             .into_iter()
-            .zip(&input)
-            .map(|(mut frame, original)| RgbImage {
-                width: original.width,
-                height: original.height,
-                data: frame.planes.swap_remove(0).0,
-            })
+            .map(unpacked)
             .collect();
         let resolution = Manifest::load(model).map_err(|e| e.to_string())?.resolution;
         Ok(PasteAlone {

@@ -190,6 +190,28 @@ pub fn packed(img: &RgbImage) -> OwnedFrame {
     }
 }
 
+/// A packed RGB frame (from [`packed`], or made from one) as an RGB image:
+/// its bytes, which are the image's, as its stride has no padding.
+pub fn unpacked(frame: OwnedFrame) -> RgbImage {
+    assert!(
+        frame.format == PixelFormat::Rgb && frame.planes[0].1 == 3 * frame.width,
+        "unpacked takes a packed RGB frame without padding, not {:?}",
+        frame.format
+    );
+    let (width, height) = (frame.width, frame.height);
+    let data = frame
+        .planes
+        .into_iter()
+        .next()
+        .expect("a packed frame has a plane")
+        .0;
+    RgbImage {
+        width,
+        height,
+        data,
+    }
+}
+
 /// A copy of a buffer of `caps` (packed RGB or I420) as a frame.
 fn owned(buffer: &gst::Buffer, caps: &gst::CapsRef) -> Result<OwnedFrame, String> {
     let info = gst_video::VideoInfo::from_caps(caps).map_err(|e| e.to_string())?;

@@ -10,9 +10,9 @@
 //! paste, not a better network.
 
 use deskstage::monitor::RgbImage;
-use gstlsydrelight::frame::{Crop, FacePlace, LightingChange, sample_crop};
+use gstlsydrelight::frame::{Crop, FacePlace, Frame, LightingChange, sample_crop};
 
-use crate::footage::{Relit, packed};
+use crate::footage::{Relit, packed, unpacked};
 use crate::quality::Region;
 
 /// Each frame of `input` with the lighting change from its crop to the same
@@ -48,28 +48,30 @@ pub fn truth_pasted(
             )?;
             let Region { x, y, size } = relit.region;
             let crop = Crop { x, y, size };
-            let original = packed(input);
-            let crop_of = |img: &RgbImage| sample_crop(&packed(img).frame(), crop, res);
+            let crop_of = |img: &RgbImage| {
+                sample_crop(
+                    &Frame::packed_rgb(&img.data, img.width, img.height),
+                    crop,
+                    res,
+                )
+            };
             let change = LightingChange::new(
-                &sample_crop(&original.frame(), crop, res),
+                &crop_of(input),
                 &crop_of(truth),
                 res,
                 face_place(relit.face, relit.region),
             );
-            let mut out = original;
+            let mut out = packed(input);
             change.apply_faded(&mut out.frame_mut(), crop, feather, strength);
-            let (data, _) = out.planes.swap_remove(0);
-            Ok(RgbImage {
-                width: input.width,
-                height: input.height,
-                data,
-            })
+            Ok(unpacked(out))
         })
         .collect()
 }
 
 /// Where `face` (one face height square about its centre) sits in the square
-/// `crop`, in fractions of the crop's side, as the element places it.
+/// `crop`, in fractions of the crop's side: `gstlsydrelight::face::face_place`
+/// read back from the element's meta, which gives the face, not the rule's
+/// square it was made from.
 fn face_place(face: Region, crop: Region) -> FacePlace {
     let side = crop.size as f32;
     let centre = |at: usize, from: usize| (at as f32 + face.size as f32 / 2.0 - from as f32) / side;
