@@ -4,6 +4,8 @@
 //! Content comes from named seed domains ("train", "heldout", "target", ...),
 //! so held-out and target lights can never occur in training data.
 
+use serde::{Deserialize, Serialize};
+
 use crate::math::{Vec3, gauss, lerp, smoothstep};
 use crate::monitor::{RgbImage, linear_to_srgb};
 use crate::noise::fbm2;
@@ -62,7 +64,8 @@ pub struct Segment {
 }
 
 /// How a playlist changes over time.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
 pub enum Style {
     /// Everything, as when watching videos: cuts and fades every few seconds.
     Capture,
@@ -76,6 +79,17 @@ pub enum Style {
     /// a whole screen of colour, or an environment), held a second or two, so
     /// that a held pose sees light from many sides.
     Stage,
+}
+
+impl Style {
+    /// The style a capture session may be given by name (`deskstage captures --content`).
+    pub fn of_capture(name: &str) -> Result<Style, String> {
+        match name {
+            "capture" => Ok(Style::Capture),
+            "stage" => Ok(Style::Stage),
+            _ => Err(format!("--content {name}: one of capture or stage")),
+        }
+    }
 }
 
 #[derive(Clone, Debug, PartialEq)]

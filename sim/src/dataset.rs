@@ -171,6 +171,18 @@ pub struct CaptureSpec {
     /// Where the monitor's light shines from (desk when a spec predates it).
     #[serde(default, skip_serializing_if = "Stage::is_desk")]
     pub stage: Stage,
+    /// What the monitor shows, when not what `stage` shows by default
+    /// ([`Stage::style`]): a light stage's lights at the desk teach the lights
+    /// the presets make there, one bright area on a dark screen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub content: Option<Style>,
+}
+
+impl CaptureSpec {
+    /// What the monitor shows in this spec's sessions.
+    pub fn style(&self) -> Style {
+        self.content.unwrap_or(self.stage.style())
+    }
 }
 
 impl Default for CaptureSpec {
@@ -183,6 +195,7 @@ impl Default for CaptureSpec {
             fps: 10.0,
             size: CAPTURE_SIZE,
             stage: Stage::Desk,
+            content: None,
         }
     }
 }
@@ -218,7 +231,7 @@ pub fn write_capture(dir: &Path, spec: &CaptureSpec, session: usize) -> io::Resu
         spec.seed,
         &format!("{domain}-monitor"),
         spec.seconds,
-        spec.stage.style(),
+        spec.style(),
     );
     let frames = (spec.seconds * spec.fps).round() as usize;
     let sensor = Sensor::default();

@@ -1,7 +1,7 @@
 //! What the desk light stage must get right: linearity, determinism, the
 //! physics of light from the monitor, keypoints, and files that reload.
 
-use deskstage::content::Playlist;
+use deskstage::content::{Playlist, Style};
 use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, keypoints};
 use deskstage::io::{Y4mReader, read_npy};
 use deskstage::material::Look;
@@ -381,6 +381,42 @@ fn written_captures_and_recordings_reload_as_rendered() {
         );
     }
     assert!(face_video.next_frame().unwrap().is_none());
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// `deskstage captures --content stage` at the desk: the screen shows a light
+/// stage's lights (one bright area on a dark screen, held), not videos, and the
+/// session's meta says so, so that a training run can tell the sessions apart.
+#[test]
+fn a_desk_session_can_show_a_light_stages_lights() {
+    let dir = std::env::temp_dir().join(format!("deskstage-content-{}", std::process::id()));
+    let videos = CaptureSpec {
+        sessions: 1,
+        seconds: 3.0,
+        fps: 2.0,
+        size: 32,
+        ..CaptureSpec::default()
+    };
+    let lights = CaptureSpec {
+        content: Some(Style::Stage),
+        ..videos.clone()
+    };
+    assert_eq!(videos.style(), Style::Capture);
+    assert_eq!(lights.style(), Style::Stage);
+    dataset::write_capture(&dir.join("lights"), &lights, 0).unwrap();
+    let (shape, monitor) = read_npy::<u8>(&dir.join("lights/monitor.npy")).unwrap();
+    let frame_len = shape[1] * shape[2] * shape[3];
+    let playlist = Playlist::random(lights.seed, "train-0-monitor", 3.0, Style::Stage);
+    for (i, shown) in monitor.chunks_exact(frame_len).enumerate() {
+        assert_eq!(shown, &playlist.frame(i as f64 / 2.0).data[..], "frame {i}");
+    }
+    let meta = std::fs::read_to_string(dir.join("lights/meta.json")).unwrap();
+    assert!(meta.contains("\"content\": \"stage\""), "{meta}");
+    assert!(
+        Style::of_capture("videos")
+            .unwrap_err()
+            .contains("capture or stage")
+    );
     std::fs::remove_dir_all(&dir).unwrap();
 }
 

@@ -2,6 +2,7 @@
 //!
 //! ```text
 //! deskstage captures  --out DIR [--sessions N] [--seconds S] [--fps F] [--seed N] [--subject N] [--stage desk|dome]
+//!                     [--content capture|stage]  (what the monitor shows; by default videos on the desk, lights under the dome)
 //! deskstage paired    --out DIR [--poses N] [--lights N] [--subject N]
 //! deskstage heldout   --out DIR [--subject N] [--stage desk|dome]  (the test set: 9 poses x 9 lights)
 //! deskstage validation --out DIR [--subject N]  (the same for choosing models; never the test set)
@@ -18,6 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::time::Instant;
 
+use deskstage::content::Style;
 use deskstage::dataset::{self, CaptureSpec, Recording, RecordingSpec, Stage, TestSet};
 use deskstage::subject::DEFAULT_SUBJECT_SEED;
 
@@ -91,7 +93,7 @@ fn recording(out: &Path, spec: RecordingSpec) -> Result<(), String> {
 /// Times the renderer: the per-pose precompute, one light, each further light
 /// in a batch, and whole recordings.
 fn speed() -> Result<(), String> {
-    use deskstage::content::{Playlist, Style};
+    use deskstage::content::Playlist;
     use deskstage::material::Look;
     use deskstage::monitor::CellLight;
     use deskstage::render::{Renderer, Scene};
@@ -158,6 +160,11 @@ fn run(a: &Args) -> Result<(), String> {
         fps: a.num("fps", CaptureSpec::default().fps)?,
         size: a.num("size", dataset::CAPTURE_SIZE)?,
         stage: Stage::from_name(a.flags.get("stage").map_or("desk", String::as_str))?,
+        content: a
+            .flags
+            .get("content")
+            .map(|name| Style::of_capture(name))
+            .transpose()?,
     };
     let io = |e: std::io::Error| e.to_string();
     match a.command.as_str() {
