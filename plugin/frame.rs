@@ -756,7 +756,7 @@ fn round_to_u8(x: f32) -> u8 {
 mod change;
 mod denoise;
 mod gain_field;
-pub use change::{FacePlace, LightingChange};
+pub use change::{FacePlace, GAIN_EPSILON, LightingChange};
 pub use denoise::DetailDenoiser;
 
 #[cfg(test)]

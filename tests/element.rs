@@ -698,6 +698,27 @@ fn a_frame_upstream_still_holds_is_copied_and_left_as_it_was() {
     assert_eq!(stat(&e, "frames-copied"), 1);
 }
 
+/// A target on part of the screen runs the decoder again with it spread evenly
+/// every 4th network frame (`spread-decodes`), so the face takes its mean colour;
+/// `spread-colour=false` never does.
+#[test]
+fn spread_colour_decodes_again_every_fourth_network_frame_unless_turned_off() {
+    for (on, decodes) in [(true, 2), (false, 0)] {
+        let (e, mut h) = face_harness(gst_video::VideoFormat::I420);
+        let c = caps(gst_video::VideoFormat::I420, FACE_W, FACE_H, 30);
+        e.set_property("reuse-interval", 1u32);
+        e.set_property("spread-colour", on);
+        e.set_property_from_str("target-preset", "warm-key-left");
+        for i in 0..8 {
+            h.push(buffer(face_rgb(), &c, frame_time(i), FRAME))
+                .unwrap();
+            h.pull().unwrap();
+        }
+        assert_eq!(stat(&e, "relit"), 8, "spread-colour={on}");
+        assert_eq!(stat(&e, "spread-decodes"), decodes, "spread-colour={on}");
+    }
+}
+
 #[test]
 fn stats_account_for_the_time_stage_by_stage() {
     let (e, mut h) = face_harness(gst_video::VideoFormat::I420);

@@ -7,6 +7,7 @@ pub mod contract;
 pub mod policy;
 pub mod relighter;
 pub mod runtime;
+pub mod spread_colour;
 pub mod temporal;
 
 pub use contract::{ContractError, CropSpec, Manifest};

@@ -12,7 +12,8 @@
 //!   the picture nor the light changed much since (sensor noise does not count,
 //!   a cut or a big motion does);
 //! - **relight**: run the network, with the paper's temporal filters (source-light
-//!   averaging and de-lit feature smoothing, [`super::temporal`]).
+//!   averaging and de-lit feature smoothing, [`super::temporal`]), the face's
+//!   colour taken from the target spread evenly ([`super::spread_colour`]).
 //!
 //! Its [`Outcome`] names the action, why, and the lighting change to paste onto
 //! the frame. The temporal state is forgotten in one place, [`FramePolicy::reset`].
@@ -26,6 +27,7 @@ use crate::parallel::beside_long;
 use super::colour_tracking::{self, ColourTracker, face_colour};
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
+use super::spread_colour::SpreadColour;
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
 use crate::engine::contract::PRESENCE_SIZE;
 use crate::frame::{
@@ -213,6 +215,8 @@ pub struct PolicyCounts {
     /// Resets that forgot something.
     pub resets: u64,
     pub target_encodes: u64,
+    /// Second decodes, with the target spread evenly ([`super::spread_colour`]).
+    pub spread_decodes: u64,
     /// Codes computed for the averaged source light: one per change of it.
     pub source_encodes: u64,
     pub predictions: u64,
@@ -271,6 +275,10 @@ pub struct FramePolicy {
     colours: ColourTracker,
     /// The target light and its code, computed once per target.
     target: Option<(Light, Vec<f32>)>,
+    /// Whether the face's colour comes from the target spread evenly.
+    spread_colour_on: bool,
+    /// The target spread evenly, its code and the colour it gives.
+    spread_colour: SpreadColour,
     /// The source light of the last frame that ran the network, before averaging.
     last_source: Option<Light>,
     /// The last averaged source light and its code.
@@ -297,6 +305,8 @@ impl FramePolicy {
             predictions: PredictionSmoother::new(temporal.prediction_weight),
             colours: ColourTracker::new(colour_tracking::SLOW_MEAN_WEIGHT),
             target: None,
+            spread_colour_on: true,
+            spread_colour: SpreadColour::default(),
             last_source: None,
             source_code: None,
             target_network_seconds: 0.0,
@@ -325,6 +335,7 @@ impl FramePolicy {
         self.smoother.reset();
         self.predictions.reset();
         self.colours.reset();
+        self.spread_colour.reset();
         self.last_source = None;
         self.last = None;
         if had_state {
@@ -349,6 +360,15 @@ impl FramePolicy {
         self.skips = skips;
     }
 
+    /// Whether the face's colour comes from the target spread evenly
+    /// ([`super::spread_colour`]); on by default.
+    pub fn set_spread_colour(&mut self, on: bool) {
+        if on != self.spread_colour_on {
+            self.spread_colour_on = on;
+            self.last = None;
+        }
+    }
+
     /// The target light, if one is set.
     pub fn target(&self) -> Option<&Light> {
         self.target.as_ref().map(|(l, _)| l)
@@ -361,10 +381,14 @@ impl FramePolicy {
         }
         let before = self.relighter.time().seconds;
         let code = self.relighter.encode_light(light);
+        let spread = SpreadColour::spread(light)
+            .map(|even| self.relighter.encode_light(&even))
+            .transpose();
         self.target_network_seconds += self.relighter.time().seconds - before;
-        let code = code?;
+        let (code, spread) = (code?, spread?);
         self.counts.target_encodes += 1;
         self.target = Some((light.clone(), code));
+        self.spread_colour.retarget(spread);
         self.last = None;
         Ok(())
     }
@@ -649,18 +673,35 @@ impl FramePolicy {
         else {
             unreachable!("the source code is set above and the target checked at the start");
         };
+        let spread_code = self.spread_colour.due().filter(|_| self.spread_colour_on);
+        let codes: Vec<&[f32]> = std::iter::once(target_code.as_slice())
+            .chain(spread_code)
+            .collect();
         let (smoother, filter_seconds) = (&mut self.smoother, &mut self.counts.filter_seconds);
         let relit = self
             .relighter
-            .relight(&encoded, source_code, target_code, |features| {
+            .relight(&encoded, source_code, &codes, |features| {
                 timed(filter_seconds, || smoother.smooth(features))
             })?;
         match relit {
-            Relit::Image(relit) => Ok(FrameOutput {
-                relit: Some(relit),
-                predicted: predicted.filter(Light::is_finite),
-                source: averaged,
-            }),
+            Relit::Images(images) => {
+                let mut images = images.into_iter();
+                let own = images.next().expect("an image for the target's own code");
+                if let Some(spread) = images.next() {
+                    self.counts.spread_decodes += 1;
+                    self.spread_colour.learn(&own, &spread);
+                }
+                let relit = if self.spread_colour_on {
+                    self.spread_colour.apply(own)
+                } else {
+                    own
+                };
+                Ok(FrameOutput {
+                    relit: Some(relit),
+                    predicted: predicted.filter(Light::is_finite),
+                    source: averaged,
+                })
+            }
             Relit::NonFinite => Ok(self.non_finite(predicted, averaged)),
         }
     }

@@ -8,8 +8,8 @@
 //! 3. `light_encoder`: a light → its code ([`Relighter::encode_light`]);
 //! 4. `delight`: e1..e7 and the source code → de-lit features f1..f7, which the
 //!    caller may change in place (the paper smooths them over time);
-//! 5. `decoder`: f1..f7, stem and the target code → the relit image
-//!    ([`Relighter::relight`] runs 4 and 5).
+//! 5. `decoder`: f1..f7, stem and a target code → the relit image, once per
+//!    target code asked for ([`Relighter::relight`] runs 4 and 5).
 
 use std::path::Path;
 use std::time::Instant;
@@ -31,9 +31,9 @@ pub struct Encoded {
 
 /// What the de-lit features' hook saw.
 pub enum Relit {
-    /// Planar sRGB in [0, 1], 3 × R × R.
-    Image(Vec<f32>),
-    /// The de-lit features or the image held NaN or Inf; the hook was not called
+    /// Planar sRGB in [0, 1], 3 × R × R, one per target code in its order.
+    Images(Vec<Vec<f32>>),
+    /// The de-lit features or an image held NaN or Inf; the hook was not called
     /// when the features were the broken ones.
     NonFinite,
 }
@@ -176,12 +176,12 @@ impl Relighter {
 
     /// De-lights the encoded frame with `source_code`, lets `features` change the
     /// de-lit features f1..f7 in place (only when they are finite), and decodes them
-    /// relit with `target_code`.
+    /// relit with each of `target_codes`.
     pub fn relight(
         &mut self,
         encoded: &Encoded,
         source_code: &[f32],
-        target_code: &[f32],
+        target_codes: &[&[f32]],
         features: impl FnOnce(&mut [&mut [f32]]),
     ) -> Result<Relit, EngineError> {
         let raw = &encoded.raw;
@@ -217,24 +217,27 @@ impl Relighter {
                 .collect::<Result<_, _>>()?;
             features(&mut slices);
         }
-        let target_code = tensor_code(target_code)?;
-        let decoder = &mut self.sessions.decoder;
-        let stem = &encoded.stem;
-        let mut dec = timed(&mut self.time.seconds, || {
-            decoder.run(ort::inputs![
-                "f1" => &delit[0], "f2" => &delit[1], "f3" => &delit[2], "f4" => &delit[3],
-                "f5" => &delit[4], "f6" => &delit[5], "f7" => &delit[6],
-                "stem" => stem,
-                "target_code" => target_code,
-            ])
-        })
-        .map_err(inference)?;
-        let relit = values(&take(&mut dec, "relit")?)?.to_vec();
-        Ok(if relit.iter().all(|v| v.is_finite()) {
-            Relit::Image(relit)
-        } else {
-            Relit::NonFinite
-        })
+        let mut images = Vec::with_capacity(target_codes.len());
+        for target_code in target_codes {
+            let target_code = tensor_code(target_code)?;
+            let decoder = &mut self.sessions.decoder;
+            let stem = &encoded.stem;
+            let mut dec = timed(&mut self.time.seconds, || {
+                decoder.run(ort::inputs![
+                    "f1" => &delit[0], "f2" => &delit[1], "f3" => &delit[2], "f4" => &delit[3],
+                    "f5" => &delit[4], "f6" => &delit[5], "f7" => &delit[6],
+                    "stem" => stem,
+                    "target_code" => target_code,
+                ])
+            })
+            .map_err(inference)?;
+            let relit = values(&take(&mut dec, "relit")?)?.to_vec();
+            if !relit.iter().all(|v| v.is_finite()) {
+                return Ok(Relit::NonFinite);
+            }
+            images.push(relit);
+        }
+        Ok(Relit::Images(images))
     }
 }
 

@@ -8,7 +8,7 @@ use super::gain_field::GainField;
 use super::{Crop, FrameMut, luma};
 
 /// Constant of the gain `g`: keeps dark regions from amplifying noise.
-const GAIN_EPSILON: f32 = 0.02;
+pub const GAIN_EPSILON: f32 = 0.02;
 /// Largest gain applied to the frame's detail, and the most the relit image may
 /// brighten the input (plus [`INVENTED_LIGHT`]).
 pub(super) const MAX_GAIN: f32 = 4.0;

@@ -55,6 +55,8 @@ pub struct Settings {
     pub target_view: View,
     /// Face running time over which a new target fades in.
     pub target_transition: gst::ClockTime,
+    /// Colour the face by the target spread evenly (`engine::spread_colour`).
+    pub spread_colour: bool,
     /// Nanoseconds by which the monitor content that lit a face frame precedes it.
     pub monitor_offset: i64,
     pub monitor_timeout: gst::ClockTime,
@@ -94,6 +96,7 @@ impl Default for Settings {
             target_environment: PathBuf::new(),
             target_view: View::default(),
             target_transition: DEFAULT_TARGET_TRANSITION,
+            spread_colour: true,
             monitor_offset: 0,
             monitor_timeout: DEFAULT_MONITOR_TIMEOUT,
             source_preset: DEFAULT_SOURCE_PRESET,
@@ -181,6 +184,7 @@ impl Settings {
             }
             "prediction-weight" => self.temporal.prediction_weight = v.get().expect(checked),
             "colour-tracking" => self.temporal.colour_tracking = v.get().expect(checked),
+            "spread-colour" => self.spread_colour = v.get().expect(checked),
             "face-tracking" => self.face_tracking = v.get().expect(checked),
             "face-detector-location" => self.face_detector_location = path_of(v),
             "face-index" => self.face_index = v.get().expect(checked),
@@ -236,6 +240,7 @@ impl Settings {
             "average-frames" => (self.temporal.average_frames as u32).to_value(),
             "prediction-weight" => self.temporal.prediction_weight.to_value(),
             "colour-tracking" => self.temporal.colour_tracking.to_value(),
+            "spread-colour" => self.spread_colour.to_value(),
             "face-tracking" => self.face_tracking.to_value(),
             "face-detector-location" => path_value(&self.face_detector_location),
             "face-index" => self.face_index.to_value(),
@@ -413,6 +418,12 @@ pub fn properties() -> &'static [glib::ParamSpec] {
                 .nick("Predicted light's colour from the face")
                 .blurb("Let the light predicted from the face (the source light without a monitor stream, monitor_src, match-check) take its colour changes from the face's own: skin keeps its colour, so they come from the light (beyond the paper); false keeps the light decoder's colour")
                 .default_value(d.temporal.colour_tracking)
+                .mutable_playing()
+                .build(),
+            glib::ParamSpecBoolean::builder("spread-colour")
+                .nick("Target's colour from its mean")
+                .blurb("Colour the face by the target light spread evenly over the screen (its mean colour), and light it where the target falls: the network gives a light on part of the screen (a key from one side) too little of its colour (beyond the paper). Runs the decoder a second time every 4th network frame; false saves that")
+                .default_value(d.spread_colour)
                 .mutable_playing()
                 .build(),
             glib::ParamSpecBoolean::builder("face-tracking")

@@ -92,6 +92,7 @@ impl LsydRelight {
         state.last_face_rt = rt.or(state.last_face_rt);
         state.policy.set_temporal(settings.temporal);
         state.policy.set_skips(settings.policy_skips());
+        state.policy.set_spread_colour(settings.spread_colour);
         let newer = lock(&self.target).newer_than(state.target_generation);
         if let Some((light, generation)) = newer {
             gst::info!(

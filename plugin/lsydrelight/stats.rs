@@ -160,6 +160,7 @@ impl Stats {
             .field("monitor-dropped", self.monitor_dropped)
             .field("target-encodes", p.target_encodes)
             .field("source-encodes", p.source_encodes)
+            .field("spread-decodes", p.spread_decodes)
             .field("target-seconds", self.target_seconds)
             .field("light-predictions", p.predictions)
             .field("non-finite", p.passed_non_finite);
