@@ -12,6 +12,7 @@ use gstlsydrelight::frame::{
 };
 use gstlsydrelight::light::Light;
 use gstlsydrelight::paths;
+use gstlsydrelight::targets::Preset;
 use lsydrelight_testkit::{
     default_model,
     person::{face_rgb, render_face},
@@ -309,23 +310,9 @@ fn the_network_gives_the_same_beside_other_work_on_the_frame() {
     }
 }
 
-/// A warm key light in the screen's left third, dim grey elsewhere.
+/// The preset `warm-key-left`: a warm key in the screen's left third.
 fn warm_key_left() -> Light {
-    use gstlsydrelight::light::{LIGHT_COLS, LIGHT_ROWS};
-    let warm = [1.0, 0.7, 0.4];
-    Light(
-        (0..3)
-            .flat_map(|c| {
-                (0..LIGHT_ROWS * LIGHT_COLS).map(move |i| {
-                    if i % LIGHT_COLS < LIGHT_COLS / 3 {
-                        warm[c]
-                    } else {
-                        0.05
-                    }
-                })
-            })
-            .collect(),
-    )
+    Preset::WarmKeyLeft.light()
 }
 
 /// How much warmer (ln of red over blue, means over the image) `out` is than `input`.
@@ -347,8 +334,7 @@ fn warming(input: &RgbImage, out: &[u8]) -> f64 {
 /// Relit to a key light on part of the screen, the face takes the key's colour
 /// from the key spread evenly (a second decode every fourth network frame): it
 /// ends warmer than with `spread-colour` off, where the network alone gives
-/// too little of it (with `models/default` on this face 0.029 against 0.020 in
-/// ln(R/B)). An even target decodes once a frame.
+/// too little of it. An even target needs no second decode.
 #[test]
 fn a_key_light_colours_the_face_by_its_mean_with_a_second_decode_every_fourth_frame() {
     let face = face_rgb();
@@ -379,5 +365,42 @@ fn a_key_light_colours_the_face_by_its_mean_with_a_second_decode_every_fourth_fr
         relit(true, &target()).1,
         0,
         "an even target is its own spread"
+    );
+}
+
+/// A target fading in small steps (or a video target's next frame) keeps the
+/// colour difference, so it costs no more second decodes than a still target;
+/// a jump to another light decodes the spread at once.
+#[test]
+fn a_fading_target_keeps_the_colour_difference_and_a_new_one_decodes_at_once() {
+    let mut p = policy(Skips {
+        reuse_interval: 1,
+        ..Skips::default()
+    });
+    let key = warm_key_left();
+    let dimmed = |by: f32| Light(key.0.iter().map(|v| v * (1.0 - by)).collect());
+    let face = face_rgb();
+    let dim_grey = || Source::Known(Light::uniform([0.1; 3]));
+    for i in 0..8 {
+        p.set_target(&dimmed(0.01 * i as f32)).unwrap();
+        assert_eq!(run(&mut p, face, dim_grey(), false).0, Action::Relit);
+    }
+    assert_eq!(
+        p.counts().spread_decodes,
+        2,
+        "every 4th frame, as for a still target"
+    );
+    let mirrored = Light(
+        key.0
+            .chunks_exact(gstlsydrelight::light::LIGHT_COLS)
+            .flat_map(|row| row.iter().rev().copied())
+            .collect(),
+    );
+    p.set_target(&mirrored).unwrap();
+    assert_eq!(run(&mut p, face, dim_grey(), false).0, Action::Relit);
+    assert_eq!(
+        p.counts().spread_decodes,
+        3,
+        "a key from the other side decodes at once"
     );
 }

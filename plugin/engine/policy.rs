@@ -27,7 +27,7 @@ use crate::parallel::beside_long;
 use super::colour_tracking::{self, ColourTracker, face_colour};
 use super::relighter::{Relighter, Relit, timed};
 use super::runtime::EngineError;
-use super::spread_colour::SpreadColour;
+use super::spread_colour::{self, SpreadColour};
 use super::temporal::{FeatureSmoother, PredictionSmoother, SourceLightAverager, Temporal};
 use crate::engine::contract::PRESENCE_SIZE;
 use crate::frame::{
@@ -335,7 +335,7 @@ impl FramePolicy {
         self.smoother.reset();
         self.predictions.reset();
         self.colours.reset();
-        self.spread_colour.reset();
+        self.spread_colour.forget();
         self.last_source = None;
         self.last = None;
         if had_state {
@@ -365,6 +365,8 @@ impl FramePolicy {
     pub fn set_spread_colour(&mut self, on: bool) {
         if on != self.spread_colour_on {
             self.spread_colour_on = on;
+            // While off no network frame counted the difference's age.
+            self.spread_colour.forget();
             self.last = None;
         }
     }
@@ -379,16 +381,16 @@ impl FramePolicy {
         if self.target().is_some_and(|l| l == light) {
             return Ok(());
         }
+        let jumped = self
+            .target()
+            .is_none_or(|old| old.distance(light) > spread_colour::TARGET_JUMP);
         let before = self.relighter.time().seconds;
         let code = self.relighter.encode_light(light);
-        let spread = SpreadColour::spread(light)
-            .map(|even| self.relighter.encode_light(&even))
-            .transpose();
         self.target_network_seconds += self.relighter.time().seconds - before;
-        let (code, spread) = (code?, spread?);
+        let code = code?;
         self.counts.target_encodes += 1;
         self.target = Some((light.clone(), code));
-        self.spread_colour.retarget(spread);
+        self.spread_colour.retarget(light, jumped);
         self.last = None;
         Ok(())
     }
@@ -586,6 +588,7 @@ impl FramePolicy {
             so_far,
         } = pending;
         let res = self.relighter.resolution();
+        self.spread_colour.follow(crop);
         let out = self.relight(&image, face, source, want_prediction)?;
         let Some(relit) = out.relit else {
             return Ok(Outcome {
@@ -673,7 +676,13 @@ impl FramePolicy {
         else {
             unreachable!("the source code is set above and the target checked at the start");
         };
-        let spread_code = self.spread_colour.due().filter(|_| self.spread_colour_on);
+        let spread_code = if self.spread_colour_on && self.spread_colour.due() {
+            let relighter = &mut self.relighter;
+            self.spread_colour
+                .code(|light| relighter.encode_light(light))?
+        } else {
+            None
+        };
         let codes: Vec<&[f32]> = std::iter::once(target_code.as_slice())
             .chain(spread_code)
             .collect();

@@ -31,10 +31,11 @@ pub struct Encoded {
 
 /// What the de-lit features' hook saw.
 pub enum Relit {
-    /// Planar sRGB in [0, 1], 3 × R × R, one per target code in its order.
+    /// Planar sRGB in [0, 1], 3 × R × R, one per target code in its order; the
+    /// first is finite, the others as decoded.
     Images(Vec<Vec<f32>>),
-    /// The de-lit features or an image held NaN or Inf; the hook was not called
-    /// when the features were the broken ones.
+    /// The de-lit features or the first image held NaN or Inf; the hook was not
+    /// called when the features were the broken ones.
     NonFinite,
 }
 
@@ -176,7 +177,8 @@ impl Relighter {
 
     /// De-lights the encoded frame with `source_code`, lets `features` change the
     /// de-lit features f1..f7 in place (only when they are finite), and decodes them
-    /// relit with each of `target_codes`.
+    /// relit with each of `target_codes`: the first the frame's target, whose
+    /// broken image breaks the frame; the others' the caller checks.
     pub fn relight(
         &mut self,
         encoded: &Encoded,
@@ -232,7 +234,7 @@ impl Relighter {
             })
             .map_err(inference)?;
             let relit = values(&take(&mut dec, "relit")?)?.to_vec();
-            if !relit.iter().all(|v| v.is_finite()) {
+            if images.is_empty() && !relit.iter().all(|v| v.is_finite()) {
                 return Ok(Relit::NonFinite);
             }
             images.push(relit);

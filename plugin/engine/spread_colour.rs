@@ -10,75 +10,126 @@
 //! runs a second time on the same de-lit features with the target spread
 //! evenly (each channel its mean over the grid), and the relit image takes that
 //! image's colour (each channel's log gain less the channels' mean) while
-//! keeping its own brightness: its light's side and strength.
+//! keeping its own brightness (that mean): its light's side and strength.
 //!
 //! The colour difference is smooth and changes slowly (the paste blurs colour
 //! over most of the crop), so the second decode runs every
-//! [`REFRESH_INTERVAL`] network frames and the difference is carried between.
+//! [`REFRESH_INTERVAL`] network frames and the difference is carried between,
+//! also over the small steps of a target's fade or a video target's frames
+//! ([`TARGET_JUMP`]) and a face's motion ([`FACE_JUMP`]).
 
-use crate::frame::GAIN_EPSILON;
+use crate::frame::{Crop, GAIN_EPSILON};
 use crate::light::Light;
 
 /// Network frames a colour difference is carried over before the decoder runs
 /// again with the target spread evenly: a fourth of the second decode's cost.
+/// (The property's blurb and README.md say "every 4th network frame".)
 pub const REFRESH_INTERVAL: u32 = 4;
+
+/// Mean absolute change of the target light (linear, [`Light::distance`])
+/// beyond which the carried difference belongs to another light and the spread
+/// is decoded at once: a new preset (`warm-key-left` to `cool-key-right` is
+/// about 0.5 apart) or a cut in a video target. The steps of a target's fade
+/// and a video's frames move it less and keep the difference, refreshed every
+/// [`REFRESH_INTERVAL`], so they cost no more than a still target.
+pub const TARGET_JUMP: f32 = 0.05;
+
+/// How far the face's crop may move (its centre, or its side changing) between
+/// network frames, as a share of its side, before the carried difference is
+/// taken for another face's: the difference lies pixel by pixel on the crop.
+pub const FACE_JUMP: f32 = 0.25;
+
+/// Mean absolute departure (linear) of a light from its spread under which it
+/// counts as even already, so the second decode would change nothing: as the
+/// policy's default tolerance for a source light equal to the target.
+const EVEN_TOLERANCE: f32 = 0.004;
 
 /// The target spread evenly and the colour difference it makes, for one
 /// stream.
 #[derive(Clone, Debug, Default)]
 pub struct SpreadColour {
-    /// The code of the target light spread evenly; `None` when the target is
-    /// already even (its own colour is the one wanted) or none is set.
+    /// The target light spread evenly; `None` when the target is already even
+    /// (its own colour is the one wanted) or none is set.
+    light: Option<Light>,
+    /// Its code, computed when first decoded with.
     code: Option<Vec<f32>>,
     /// Per channel (planar, 3 × R × R), the spread image's colour less the
     /// target's own, in log gain, from the last second decode.
     difference: Option<Vec<f32>>,
     /// Network frames since `difference` was computed.
     age: u32,
+    /// The face's crop on the last network frame.
+    crop: Option<Crop>,
 }
 
 impl SpreadColour {
     /// `light` spread evenly over the grid: each channel its mean. `None` when
-    /// every cell already has the same light (within 1e-6), so the spread
-    /// changes nothing.
+    /// `light` is within [`EVEN_TOLERANCE`] of it already.
     pub fn spread(light: &Light) -> Option<Light> {
         let cells = light.0.len() / 3;
-        let channels: Vec<&[f32]> = light.0.chunks_exact(cells).collect();
-        let uneven = channels
-            .iter()
-            .any(|channel| channel.iter().any(|v| (v - channel[0]).abs() > 1e-6));
-        uneven.then(|| {
-            Light::uniform([0, 1, 2].map(|c| channels[c].iter().sum::<f32>() / cells as f32))
-        })
+        let mean =
+            |c: usize| light.0[c * cells..(c + 1) * cells].iter().sum::<f32>() / cells as f32;
+        let spread = Light::uniform([mean(0), mean(1), mean(2)]);
+        (light.distance(&spread) > EVEN_TOLERANCE).then_some(spread)
     }
 
-    /// A new target's spread code (`None` for an even target): the last
-    /// difference belonged to the old one.
-    pub fn retarget(&mut self, code: Option<Vec<f32>>) {
-        *self = SpreadColour {
-            code,
-            ..SpreadColour::default()
-        };
+    /// A new target light. The last difference is kept when the target moved by
+    /// no more than [`TARGET_JUMP`] (`jumped` false) and stays uneven, and
+    /// dropped otherwise.
+    pub fn retarget(&mut self, target: &Light, jumped: bool) {
+        let light = Self::spread(target);
+        if jumped || light.is_none() {
+            self.forget();
+        }
+        if light != self.light {
+            self.code = None;
+        }
+        self.light = light;
+    }
+
+    /// Follows the face to `crop` on a network frame: a jump of more than
+    /// [`FACE_JUMP`] from the last one drops the difference.
+    pub fn follow(&mut self, crop: Crop) {
+        if self.crop.is_some_and(|last| jumped(last, crop)) {
+            self.forget();
+        }
+        self.crop = Some(crop);
     }
 
     /// Forgets the last difference (the stream's state starts afresh); the
-    /// target's code stays.
-    pub fn reset(&mut self) {
+    /// target stays.
+    pub fn forget(&mut self) {
         self.difference = None;
         self.age = 0;
     }
 
-    /// The spread code to decode with on this network frame, when a new
-    /// difference is due: none yet, or [`REFRESH_INTERVAL`] frames old.
-    pub fn due(&self) -> Option<&[f32]> {
-        let stale = self.difference.is_none() || self.age >= REFRESH_INTERVAL;
-        self.code.as_deref().filter(|_| stale)
+    /// Whether this network frame is to decode the spread: the target is
+    /// uneven, and there is no difference yet or it is [`REFRESH_INTERVAL`]
+    /// frames old.
+    pub fn due(&self) -> bool {
+        self.light.is_some() && (self.difference.is_none() || self.age >= REFRESH_INTERVAL)
+    }
+
+    /// The spread light's code, by `encode` the first time it is asked for;
+    /// `None` for an even target.
+    pub fn code<E>(
+        &mut self,
+        encode: impl FnOnce(&Light) -> Result<Vec<f32>, E>,
+    ) -> Result<Option<&[f32]>, E> {
+        let Some(light) = &self.light else {
+            return Ok(None);
+        };
+        if self.code.is_none() {
+            self.code = Some(encode(light)?);
+        }
+        Ok(self.code.as_deref())
     }
 
     /// Takes the colour difference between `spread` (decoded with the spread
     /// code) and `relit` (with the target's own), both planar sRGB of the same
-    /// size. A difference that is not finite is not kept.
+    /// size. A difference that is not finite (the network's NaN) is not kept.
     pub fn learn(&mut self, relit: &[f32], spread: &[f32]) {
+        debug_assert_eq!(relit.len(), spread.len());
         let n = relit.len() / 3;
         let log_ratio = |c: usize, i: usize| {
             ((spread[c * n + i] + GAIN_EPSILON) / (relit[c * n + i] + GAIN_EPSILON)).ln()
@@ -98,18 +149,27 @@ impl SpreadColour {
     }
 
     /// `relit` with the last colour difference applied, pixel by pixel
-    /// (`(v' + ε) = (v + ε) · e^d`, so each pixel's brightness stays); as it is
-    /// with none, or when its size is not the difference's. Counts a network
-    /// frame.
+    /// (`(v' + ε) = (v + ε) · e^d`, so the mean of each pixel's channels' logs
+    /// stays) and kept in [0, 1]; as it is with none. Counts a network frame.
     pub fn apply(&mut self, mut relit: Vec<f32>) -> Vec<f32> {
         self.age = self.age.saturating_add(1);
-        if let Some(difference) = self.difference.as_ref().filter(|d| d.len() == relit.len()) {
+        if let Some(difference) = &self.difference {
+            debug_assert_eq!(relit.len(), difference.len());
             for (v, d) in relit.iter_mut().zip(difference) {
-                *v = (*v + GAIN_EPSILON) * d.exp() - GAIN_EPSILON;
+                *v = ((*v + GAIN_EPSILON) * d.exp() - GAIN_EPSILON).clamp(0.0, 1.0);
             }
         }
         relit
     }
+}
+
+/// Whether the crop moved from `last` to `now` by more than [`FACE_JUMP`] of
+/// its side.
+fn jumped(last: Crop, now: Crop) -> bool {
+    let side = last.size.max(1) as f32;
+    let centre = |c: Crop| [c.x, c.y].map(|v| v as f32 + c.size as f32 / 2.0);
+    let ([x0, y0], [x1, y1]) = (centre(last), centre(now));
+    (x1 - x0).hypot(y1 - y0) > FACE_JUMP * side || (now.size as f32 - side).abs() > FACE_JUMP * side
 }
 
 #[cfg(test)]
@@ -154,8 +214,8 @@ mod tests {
         let own = vec![0.6, 0.2, /* G */ 0.4, 0.4, /* B */ 0.2, 0.6];
         let spread = vec![0.9, 0.9, 0.6, 0.6, 0.3, 0.3];
         let mut colour = SpreadColour::default();
-        colour.retarget(Some(vec![0.0; 4]));
-        assert!(colour.due().is_some(), "the first frame decodes the spread");
+        colour.retarget(&key_left(), true);
+        assert!(colour.due(), "the first frame decodes the spread");
         colour.learn(&own, &spread);
         let out = colour.apply(own.clone());
         for i in 0..2 {
@@ -176,33 +236,116 @@ mod tests {
     }
 
     #[test]
-    fn the_difference_is_refreshed_every_interval_and_forgotten_on_a_new_target() {
-        let image = vec![0.5; 3 * 4];
+    fn the_result_stays_in_range() {
         let mut colour = SpreadColour::default();
-        assert!(colour.due().is_none(), "no target, nothing to decode");
-        colour.retarget(Some(vec![0.0; 4]));
+        colour.retarget(&key_left(), true);
+        colour.learn(&[0.9, 0.9, 0.01], &[0.01, 0.9, 0.9]);
+        assert!(
+            colour
+                .apply(vec![1.0, 1.0, 0.0])
+                .iter()
+                .all(|v| (0.0..=1.0).contains(v))
+        );
+    }
+
+    /// Network frames of `colour` with the face at `crop`, each after the
+    /// target moved (a step of a fade or a video's next frame, or a new target
+    /// when `jumped`) when `Some`; returns how many decoded the spread.
+    fn decodes(colour: &mut SpreadColour, frames: u32, jump: Option<bool>, crop: Crop) -> u32 {
+        let image = vec![0.5; 3 * 4];
         let mut decodes = 0;
-        for _ in 0..3 * REFRESH_INTERVAL {
-            if colour.due().is_some() {
+        for _ in 0..frames {
+            if let Some(jumped) = jump {
+                colour.retarget(&key_left(), jumped);
+            }
+            colour.follow(crop);
+            if colour.due() {
                 decodes += 1;
                 colour.learn(&image, &image);
             }
             colour.apply(image.clone());
         }
-        assert_eq!(decodes, 3);
-        colour.retarget(Some(vec![1.0; 4]));
-        assert!(colour.due().is_some(), "a new target decodes at once");
-        colour.retarget(None);
-        assert!(colour.due().is_none(), "an even target never decodes twice");
+        decodes
+    }
+
+    #[test]
+    fn the_difference_is_refreshed_every_interval_and_kept_over_small_steps() {
+        let face = Crop {
+            x: 100,
+            y: 100,
+            size: 200,
+        };
+        let mut colour = SpreadColour::default();
+        assert!(!colour.due(), "no target, nothing to decode");
+        colour.retarget(&key_left(), true);
+        assert_eq!(decodes(&mut colour, 3 * REFRESH_INTERVAL, None, face), 3);
+        assert_eq!(
+            decodes(&mut colour, 3 * REFRESH_INTERVAL, Some(false), face),
+            3,
+            "a fading or video target costs no more than a still one"
+        );
+        assert_eq!(decodes(&mut colour, 1, None, face), 1, "due again");
+        let moved = Crop { x: 110, ..face };
+        assert_eq!(
+            decodes(&mut colour, REFRESH_INTERVAL - 1, None, moved),
+            0,
+            "a face moving a little keeps the difference"
+        );
+    }
+
+    #[test]
+    fn a_new_target_an_even_one_or_a_face_jump_drops_the_difference() {
+        let face = Crop {
+            x: 100,
+            y: 100,
+            size: 200,
+        };
+        let mut colour = SpreadColour::default();
+        colour.retarget(&key_left(), true);
+        decodes(&mut colour, 1, None, face);
+        assert_eq!(
+            decodes(&mut colour, 3, Some(true), face),
+            3,
+            "each jump of the target decodes at once"
+        );
+        let elsewhere = Crop { x: 300, ..face };
+        assert_eq!(
+            decodes(&mut colour, 1, None, elsewhere),
+            1,
+            "another face decodes at once"
+        );
+        colour.retarget(&Light::uniform([0.5; 3]), false);
+        assert!(!colour.due(), "an even target needs no second decode");
+        colour.retarget(&key_left(), false);
+        assert!(colour.due(), "no difference is kept across an even target");
+    }
+
+    #[test]
+    fn the_spread_code_is_encoded_once_a_target_and_only_when_asked() {
+        let mut colour = SpreadColour::default();
+        let encodes = std::cell::Cell::new(0);
+        let encode = |_: &Light| -> Result<Vec<f32>, ()> {
+            encodes.set(encodes.get() + 1);
+            Ok(vec![0.0; 4])
+        };
+        colour.retarget(&key_left(), true);
+        assert!(colour.code(encode).unwrap().is_some());
+        assert!(colour.code(encode).unwrap().is_some());
+        colour.retarget(&key_left(), false);
+        assert!(colour.code(encode).unwrap().is_some());
+        assert_eq!(encodes.get(), 1, "the same spread is encoded once");
+        colour.retarget(&Light::uniform([0.5; 3]), false);
+        assert!(colour.code(encode).unwrap().is_none());
+        assert_eq!(encodes.get(), 1, "an even target encodes nothing");
     }
 
     #[test]
     fn a_broken_spread_image_is_not_kept() {
         let own = vec![0.5; 3];
         let mut colour = SpreadColour::default();
-        colour.retarget(Some(vec![0.0; 4]));
+        colour.retarget(&key_left(), true);
         colour.learn(&own, &[f32::NAN, 0.5, 0.5]);
-        assert!(colour.due().is_some(), "still due: nothing was learnt");
+        assert!(colour.due(), "still due: nothing was learnt");
         assert_eq!(colour.apply(own.clone()), own);
     }
 }
