@@ -383,7 +383,7 @@ impl FramePolicy {
         }
         let jumped = self
             .target()
-            .is_none_or(|old| old.distance(light) > spread_colour::TARGET_JUMP);
+            .is_none_or(|old| old.distance(light) > spread_colour::LIGHT_JUMP);
         let before = self.relighter.time().seconds;
         let code = self.relighter.encode_light(light);
         self.target_network_seconds += self.relighter.time().seconds - before;
@@ -588,7 +588,7 @@ impl FramePolicy {
             so_far,
         } = pending;
         let res = self.relighter.resolution();
-        self.spread_colour.follow(crop);
+        self.spread_colour.follow_face(crop);
         let out = self.relight(&image, face, source, want_prediction)?;
         let Some(relit) = out.relit else {
             return Ok(Outcome {
@@ -662,6 +662,7 @@ impl FramePolicy {
         let averaged = timed(&mut self.counts.filter_seconds, || {
             self.averager.push(this_source)
         });
+        self.spread_colour.follow_source(&averaged);
         // A still screen gives the same averaged light frame after frame: its code is kept.
         if self
             .source_code

@@ -15,8 +15,8 @@
 //! The colour difference is smooth and changes slowly (the paste blurs colour
 //! over most of the crop), so the second decode runs every
 //! [`REFRESH_INTERVAL`] network frames and the difference is carried between,
-//! also over the small steps of a target's fade or a video target's frames
-//! ([`TARGET_JUMP`]) and a face's motion ([`FACE_JUMP`]).
+//! also over the small steps of a target's fade, a video target's or a
+//! screen's frames ([`LIGHT_JUMP`]) and a face's motion ([`FACE_JUMP`]).
 
 use crate::frame::{Crop, GAIN_EPSILON};
 use crate::light::Light;
@@ -26,13 +26,14 @@ use crate::light::Light;
 /// (The property's blurb and README.md say "every 4th network frame".)
 pub const REFRESH_INTERVAL: u32 = 4;
 
-/// Mean absolute change of the target light (linear, [`Light::distance`])
-/// beyond which the carried difference belongs to another light and the spread
-/// is decoded at once: a new preset (`warm-key-left` to `cool-key-right` is
-/// about 0.5 apart) or a cut in a video target. The steps of a target's fade
-/// and a video's frames move it less and keep the difference, refreshed every
-/// [`REFRESH_INTERVAL`], so they cost no more than a still target.
-pub const TARGET_JUMP: f32 = 0.05;
+/// Mean absolute change of the target light, or of the source light the face
+/// is de-lit with (linear, [`Light::distance`]), beyond which the carried
+/// difference belongs to another light and the spread is decoded at once: a
+/// new preset (`warm-key-left` to `cool-key-right` is about 0.5 apart), a cut
+/// in a video target or on the screen. The steps of a fade and a video's
+/// frames move it less and keep the difference, refreshed every
+/// [`REFRESH_INTERVAL`], so they cost no more than a still light.
+pub const LIGHT_JUMP: f32 = 0.05;
 
 /// How far the face's crop may move (its centre, or its side changing) between
 /// network frames, as a share of its side, before the carried difference is
@@ -60,6 +61,8 @@ pub struct SpreadColour {
     age: u32,
     /// The face's crop on the last network frame.
     crop: Option<Crop>,
+    /// The source light the face was de-lit with on the last network frame.
+    source: Option<Light>,
 }
 
 impl SpreadColour {
@@ -74,7 +77,7 @@ impl SpreadColour {
     }
 
     /// A new target light. The last difference is kept when the target moved by
-    /// no more than [`TARGET_JUMP`] (`jumped` false) and stays uneven, and
+    /// no more than [`LIGHT_JUMP`] (`jumped` false) and stays uneven, and
     /// dropped otherwise.
     pub fn retarget(&mut self, target: &Light, jumped: bool) {
         let light = Self::spread(target);
@@ -89,11 +92,25 @@ impl SpreadColour {
 
     /// Follows the face to `crop` on a network frame: a jump of more than
     /// [`FACE_JUMP`] from the last one drops the difference.
-    pub fn follow(&mut self, crop: Crop) {
+    pub fn follow_face(&mut self, crop: Crop) {
         if self.crop.is_some_and(|last| jumped(last, crop)) {
             self.forget();
         }
         self.crop = Some(crop);
+    }
+
+    /// Follows the source light the face is de-lit with on a network frame: a
+    /// change of more than [`LIGHT_JUMP`] from the last one drops the
+    /// difference, which was read off differently de-lit features.
+    pub fn follow_source(&mut self, source: &Light) {
+        if self
+            .source
+            .as_ref()
+            .is_some_and(|last| last.distance(source) > LIGHT_JUMP)
+        {
+            self.forget();
+        }
+        self.source = Some(source.clone());
     }
 
     /// Forgets the last difference (the stream's state starts afresh); the
@@ -258,7 +275,7 @@ mod tests {
             if let Some(jumped) = jump {
                 colour.retarget(&key_left(), jumped);
             }
-            colour.follow(crop);
+            colour.follow_face(crop);
             if colour.due() {
                 decodes += 1;
                 colour.learn(&image, &image);
@@ -294,7 +311,7 @@ mod tests {
     }
 
     #[test]
-    fn a_new_target_an_even_one_or_a_face_jump_drops_the_difference() {
+    fn a_new_target_an_even_one_a_face_jump_or_a_screen_cut_drops_the_difference() {
         let face = Crop {
             x: 100,
             y: 100,
@@ -314,6 +331,15 @@ mod tests {
             1,
             "another face decodes at once"
         );
+        assert_eq!(decodes(&mut colour, 1, Some(true), face), 1);
+        colour.follow_source(&Light::uniform([0.9, 0.1, 0.1]));
+        colour.follow_source(&Light::uniform([0.88, 0.1, 0.1]));
+        assert!(
+            !colour.due(),
+            "a screen changing a little keeps the difference"
+        );
+        colour.follow_source(&Light::uniform([0.1, 0.1, 0.9]));
+        assert!(colour.due(), "a cut on the screen decodes at once");
         colour.retarget(&Light::uniform([0.5; 3]), false);
         assert!(!colour.due(), "an even target needs no second decode");
         colour.retarget(&key_left(), false);
