@@ -110,7 +110,11 @@ impl SpreadColour {
         {
             self.forget();
         }
-        self.source = Some(source.clone());
+        // Called every network frame: the last light's buffer is reused.
+        match &mut self.source {
+            Some(last) => last.0.clone_from(&source.0),
+            None => self.source = Some(source.clone()),
+        }
     }
 
     /// Forgets the last difference (the stream's state starts afresh); the
