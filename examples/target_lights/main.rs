@@ -6,7 +6,7 @@
 //! ```text
 //! cargo run --example target_lights -- sheet results/targets/presets.png
 //! cargo run --example target_lights -- projection results/targets/environment.png
-//! cargo run --example target_lights -- measure [--frames 60] [--model models/default] [--paste-alone]
+//! cargo run --example target_lights -- measure [--frames 60] [--model models/default] [--paste-alone] [--set PROPERTY=VALUE]...
 //! cargo run --example target_lights -- timing
 //! cargo run --release --example target_lights -- direction [--frames 30] [--model models/starter] \
 //!     [--out results/direction]
@@ -75,6 +75,11 @@ enum Command {
         /// (`lsydrelight_testkit::oracle`), pasted where the element relit.
         #[arg(long)]
         paste_alone: bool,
+        /// An element property to set on every run, as gst-launch writes it
+        /// (`--set alpha=1 --set spread-colour=false`): what a setting costs or
+        /// buys against the truth.
+        #[arg(long = "set", value_name = "PROPERTY=VALUE", value_parser = property_setting)]
+        settings: Vec<(String, String)>,
     },
     /// What target changes and video targets cost.
     Timing,
@@ -99,6 +104,14 @@ enum Command {
     },
 }
 
+/// `PROPERTY=VALUE`, split at its first `=`.
+fn property_setting(setting: &str) -> Result<(String, String), String> {
+    setting
+        .split_once('=')
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .ok_or_else(|| format!("{setting}: write a property setting as PROPERTY=VALUE"))
+}
+
 /// A preset by its nick, `none` included.
 fn preset_named(nick: &str) -> Result<Preset, String> {
     if nick == Preset::None.nick() {
@@ -118,11 +131,13 @@ fn main() -> Result<(), String> {
             model,
             stage,
             paste_alone,
+            settings,
         } => measure(
             frames,
             &model.unwrap_or_else(default_model),
             stage,
             paste_alone,
+            &settings,
         ),
         Command::Timing => timing(),
         Command::Direction {
@@ -439,10 +454,17 @@ fn call_recording(frames: usize, stage: Stage) -> Result<(PathBuf, Vec<Measured>
 /// map at four yaws, and scores each against the exact render under that light;
 /// with `paste_alone`, also the paste of the truth's own change where the
 /// element relit (what the element would score with a perfect network).
-fn measure(frames: usize, model: &Path, stage: Stage, paste_alone: bool) -> Result<(), String> {
+/// `settings` are set on the element in every run, after the target's own.
+fn measure(
+    frames: usize,
+    model: &Path,
+    stage: Stage,
+    paste_alone: bool,
+    settings: &[(String, String)],
+) -> Result<(), String> {
     let (dir, targets) = call_recording(frames, stage)?;
     let paste = paste_alone
-        .then(|| PasteAlone::new(&dir, frames, model))
+        .then(|| PasteAlone::new(&dir, frames, model, settings))
         .transpose()?;
     let extra = if paste.is_some() {
         (
@@ -464,7 +486,12 @@ fn measure(frames: usize, model: &Path, stage: Stage, paste_alone: bool) -> Resu
         .chain(targets.into_iter().map(|t| (t.name, t.properties)));
     for (name, props) in all {
         let mut p: Vec<(&str, &str)> = vec![("model-location", &model_str)];
-        p.extend(props.iter().map(|(k, v)| (k.as_str(), v.as_str())));
+        p.extend(
+            props
+                .iter()
+                .chain(settings)
+                .map(|(k, v)| (k.as_str(), v.as_str())),
+        );
         let s = score_recording(&dir, &name, true, &p, false)?;
         let columns = match &paste {
             Some(paste) => {
@@ -498,15 +525,25 @@ impl PasteAlone {
     /// face, and its frames denoised as the element denoises them before its
     /// paste. The face's box, fade and strength come from face following alone,
     /// not from the target or the monitor, so one run serves every target.
-    fn new(dir: &Path, frames: usize, model: &Path) -> Result<PasteAlone, String> {
+    /// `settings` as [`measure`]'s.
+    fn new(
+        dir: &Path,
+        frames: usize,
+        model: &Path,
+        settings: &[(String, String)],
+    ) -> Result<PasteAlone, String> {
         init();
         let input = read_y4m(&dir.join("face.y4m"), frames)?;
         let relit: Vec<_> = relight_with(
             &input,
             model,
             &format!(
-                "target-location=\"{}\"",
-                dir.join("target-studio.png").display()
+                "target-location=\"{}\"{}",
+                dir.join("target-studio.png").display(),
+                settings
+                    .iter()
+                    .map(|(k, v)| format!(" {k}={v}"))
+                    .collect::<String>()
             ),
             Format::Rgb,
         )?
