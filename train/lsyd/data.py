@@ -144,6 +144,26 @@ def jitter_crops(
     return warp(src), l_src, warp(tgt), l_tgt
 
 
+def mirror_pairs(batch: tuple[torch.Tensor, ...], generator: torch.Generator) -> tuple[torch.Tensor, ...]:
+    """A batch of (source, source light, target, target light) with each pair, at random half
+    of the time, mirrored left to right: both images and both lights (the screen as shown, its
+    columns reversed), the same for the pair's two halves.
+
+    The mirrored pair is the mirror image of the person under the mirrored screen, lit as the
+    physics lights it (the webcam sits over the screen's middle), so it is a true pair. Tried
+    for the starter's last stage and not kept: it drew less of a light's side (docs/training.md,
+    "Mirrored pairs")."""
+    src, l_src, tgt, l_tgt = batch
+    flip = torch.rand(src.shape[0], generator=generator) < 0.5
+
+    def mirrored(x: torch.Tensor) -> torch.Tensor:
+        x = x.clone()
+        x[flip] = x[flip].flip(-1)
+        return x
+
+    return mirrored(src), mirrored(l_src), mirrored(tgt), mirrored(l_tgt)
+
+
 def resize_frames(frames: np.ndarray, resolution: int) -> np.ndarray:
     """(N, H, W, 3) frames area-resized to (N, R, R, 3) uint8, a block at a time to bound memory."""
     out = np.empty((len(frames), resolution, resolution, 3), dtype=np.uint8)

@@ -109,6 +109,10 @@ class TrainConfig:
     # source and target (``data.jitter_crops``), so the network meets faces a little larger,
     # smaller or off their place in the crop, as a real detector's box puts them. 0: none.
     box_jitter: float = 0.0
+    # Each pair shown mirrored left to right half of the time, its face and both its lights
+    # alike (``data.mirror_pairs``): a person under a screen is as likely as their mirror
+    # image under the mirrored screen. Tried for the starter, not kept (docs/training.md).
+    mirror: bool = False
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -128,6 +132,7 @@ class TrainConfig:
             weight_average=d.get("weight_average", 0.0),
             rehearsal_share=d.get("rehearsal_share"),
             box_jitter=d.get("box_jitter", 0.0),
+            mirror=d.get("mirror", False),
         )
 
 

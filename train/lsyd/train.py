@@ -250,6 +250,8 @@ def train(
                 batch = pairs.batch(idx)
                 if cfg.box_jitter:
                     batch = data.jitter_crops(batch, cfg.box_jitter, trainer.sampler)
+                if cfg.mirror:
+                    batch = data.mirror_pairs(batch, trainer.sampler)
                 terms = trainer.train_step(batch)
                 bar.update(1)
                 if trainer.step % 20 == 0 or trainer.step == cfg.steps:
@@ -376,6 +378,11 @@ def main() -> None:
         default=TrainConfig.box_jitter,
         help="not in the paper: zoom each pair by up to this fraction, and shift it by half as many face heights",
     )
+    p.add_argument(
+        "--mirror",
+        action="store_true",
+        help="not in the paper: show each pair mirrored left to right half of the time, face and lights alike",
+    )
     p.add_argument("--pairs", default="keypoints", choices=["keypoints", "exact", "both"])
     p.add_argument("--max-keypoint-distance", type=float, default=pairing.PairingRule.max_keypoint_distance)
     p.add_argument("--threads", type=int, default=0, help="CPU threads (0: all cores)")
@@ -418,6 +425,7 @@ def main() -> None:
         weight_average=a.weight_average,
         rehearsal_share=a.rehearsal_share,
         box_jitter=a.box_jitter,
+        mirror=a.mirror,
     )
     print(f"training {net} on {device} with {torch.get_num_threads()} threads")
     train(cfg, a.data, a.out, a.resume, a.checkpoint_every, device, a.stop_at)

@@ -1,4 +1,4 @@
-"""The training batches' box jitter (``data.jitter_crops``)."""
+"""The training batches' box jitter (``data.jitter_crops``) and mirrored pairs (``data.mirror_pairs``)."""
 
 import torch
 
@@ -54,6 +54,36 @@ def test_the_face_is_zoomed_and_shifted_within_the_jitter():
 def test_no_jitter_leaves_the_crops_as_they_are():
     faces = face_disc(4)
     assert torch.allclose(data.jitter_crops((faces, None, faces, None), 0.0, torch.Generator())[0], faces, atol=1e-5)
+
+
+def lit_from_the_left(n: int) -> tuple[torch.Tensor, torch.Tensor]:
+    """``n`` crops brighter on their left half, and ``n`` lights bright in their left columns."""
+    images = torch.full((n, 3, RES, RES), 0.2)
+    images[..., : RES // 2] = 0.8
+    lights = torch.zeros(n, 3, contract.LIGHT_ROWS, contract.LIGHT_COLS)
+    lights[..., : contract.LIGHT_COLS // 4] = 1.0
+    return images, lights
+
+
+def left_heavy(x: torch.Tensor) -> torch.Tensor:
+    """Per item, whether its left half outweighs its right."""
+    half = x.shape[-1] // 2
+    return x[..., :half].sum(dim=(1, 2, 3)) > x[..., half:].sum(dim=(1, 2, 3))
+
+
+def test_a_mirrored_pair_keeps_its_light_on_the_side_its_face_is_lit():
+    images, lights = lit_from_the_left(64)
+    src, l_src, tgt, l_tgt = data.mirror_pairs(
+        (images, lights, images * 0.5, lights * 0.25), torch.Generator().manual_seed(0)
+    )
+    flipped = ~left_heavy(src)
+    # The pair's two images and two lights are mirrored together, or not at all.
+    for x in (l_src, tgt, l_tgt):
+        assert torch.equal(~left_heavy(x), flipped)
+    assert torch.allclose(tgt, src * 0.5) and torch.allclose(l_tgt, l_src * 0.25)
+    assert 16 <= int(flipped.sum()) <= 48, "about half the pairs are mirrored"
+    assert torch.equal(src[flipped], images[flipped].flip(-1)) and torch.equal(src[~flipped], images[~flipped])
+    assert torch.equal(images, lit_from_the_left(64)[0]), "the batch given is left as it was"
 
 
 def test_a_box_jitter_out_of_range_is_refused_naming_the_range():
