@@ -198,6 +198,13 @@ mod tests {
     use super::*;
     use crate::light::{LIGHT_COLS, LIGHT_ROWS};
 
+    /// A face's crop in the frame, where the tests' frames begin.
+    const FACE: Crop = Crop {
+        x: 100,
+        y: 100,
+        size: 200,
+    };
+
     /// A light bright warm in its left third, dim grey elsewhere: a key from the left.
     fn key_left() -> Light {
         let cells = LIGHT_ROWS * LIGHT_COLS;
@@ -291,11 +298,7 @@ mod tests {
 
     #[test]
     fn the_difference_is_refreshed_every_interval_and_kept_over_small_steps() {
-        let face = Crop {
-            x: 100,
-            y: 100,
-            size: 200,
-        };
+        let face = FACE;
         let mut colour = SpreadColour::default();
         assert!(!colour.due(), "no target, nothing to decode");
         colour.retarget(&key_left(), true);
@@ -316,11 +319,7 @@ mod tests {
 
     #[test]
     fn a_new_target_an_even_one_a_face_jump_or_a_screen_cut_drops_the_difference() {
-        let face = Crop {
-            x: 100,
-            y: 100,
-            size: 200,
-        };
+        let face = FACE;
         let mut colour = SpreadColour::default();
         colour.retarget(&key_left(), true);
         decodes(&mut colour, 1, None, face);
