@@ -21,7 +21,7 @@ use lsydrelight_testkit::{
         relight_with, small_portrait_1080p, through,
     },
     init,
-    quality::{Region, View, box_edges, mean_level, mottling, pumping},
+    quality::{Region, SquareMeans, View, box_edges, mean_level, mottling, pumping},
     recording::ensure_recording,
 };
 
@@ -54,8 +54,8 @@ struct Measures {
     mottling: f64,
     /// Over the face within it ([`Relit::face`]), as issue 12 defines it.
     face_mottling: f64,
-    /// The relit square's (input, output) mean levels.
-    means: (f64, f64),
+    /// The relit square's mean levels, and whether the change was fading.
+    means: SquareMeans,
 }
 
 /// Per frame, the element fed `format` with its defaults: its output
@@ -74,6 +74,7 @@ fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<Measures>
         .zip(output)
         .zip(relits)
         .map(|((i, o), relit)| {
+            let fading = relit.as_ref().is_some_and(Relit::fading);
             let (region, face) = relit.map(|r| (r.region, r.face)).unwrap_or_else(|| {
                 let size = i.width.min(i.height);
                 let square = Region {
@@ -91,10 +92,11 @@ fn measure(input: &[RgbImage], target: PathBuf, format: Format) -> Vec<Measures>
                 unexplained_box_edge: edges.unexplained.score,
                 mottling: mottling(&colour_in, &colour_out, region),
                 face_mottling: mottling(&colour_in, &colour_out, face),
-                means: (
-                    mean_level(&colour_in, region),
-                    mean_level(&colour_out, region),
-                ),
+                means: SquareMeans {
+                    input: mean_level(&colour_in, region),
+                    output: mean_level(&colour_out, region),
+                    fading,
+                },
             }
         })
         .collect()
@@ -124,7 +126,7 @@ fn a_real_portrait_is_relit_without_a_box_or_blotches() {
     let m = measure(&decode(&path, 12).unwrap(), sunset(), Format::Rgb);
     let last = m.last().unwrap();
     // `cargo run --release --example benchmark -- --quality` over 90 frames:
-    // 3.6% (11.3% in all) and 0.83%.
+    // 4.7% (25.7% in all) and 0.63%.
     assert!(
         last.unexplained_box_edge < 10.0,
         "box edge {:.1}% where the picture has none ({:.1}% in all)",
@@ -132,8 +134,8 @@ fn a_real_portrait_is_relit_without_a_box_or_blotches() {
         last.box_edge
     );
     assert!(last.mottling < 2.0, "mottling {:.2}%", last.mottling);
-    // Over the face alone, the issue's definition: 0.39% over 90 frames
-    // (0.40% counting the near-black pixels; `quality::MOTTLING_BLACK`).
+    // Over the face alone, the issue's definition: 1.07% over 90 frames
+    // (1.18% counting the near-black pixels; `quality::MOTTLING_BLACK`).
     assert!(
         last.face_mottling < 2.0,
         "mottling over the face {:.2}%",
@@ -152,17 +154,18 @@ fn a_film_clip_is_relit_without_a_box_or_pumping() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let mottled = median(m.iter().map(|m| m.mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 6.0% (15.1% in all), 1.10% and 0.93 levels over 90 frames
-    // (`benchmark --quality`). Over the whole relit square the mottling is
+    // 8.3% (28.1% in all), 1.24% and 0.31 levels over 90 frames
+    // (`benchmark --quality`; 0.93 levels counting the face's fade-in, which
+    // `pumping` leaves out). Over the whole relit square the mottling is
     // mostly the dark clip's hair and room just above black, so its bar is
     // looser than the face's.
     assert!(
         unexplained < 10.0,
         "box edge {unexplained:.1}% where the picture has none ({box_edge:.1}% in all)"
     );
-    assert!(pumped < 1.0, "pumping {pumped:.2} levels");
+    assert!(pumped < 0.6, "pumping {pumped:.2} levels");
     assert!(mottled < 3.0, "mottling {mottled:.2}%");
-    // Over the face alone, the bar: 0.48% over 90 frames (0.56% in all).
+    // Over the face alone, the bar: 1.00% over 90 frames (1.37% in all).
     let face_mottled = median(m.iter().map(|m| m.face_mottling));
     assert!(
         face_mottled < 2.0,
@@ -178,7 +181,7 @@ fn a_real_portrait_in_i420_takes_the_change_each_pixel_would_in_rgb() {
     };
     let m = measure(&decode(&path, 12).unwrap(), sunset(), Format::I420);
     let last = m.last().unwrap();
-    // 3.7% (10.4% in all), 0.80% and over the face 0.92% over 90 frames
+    // 4.7% (24.6% in all), 0.75% and over the face 0.79% over 90 frames
     // (`benchmark --quality`, read as I420 carries them).
     assert!(
         last.unexplained_box_edge < 10.0,
@@ -205,9 +208,9 @@ fn a_film_clip_in_i420_is_relit_as_in_rgb() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let face_mottled = median(m.iter().map(|m| m.face_mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 8.1% (16.6% in all), 3.85% and 0.93 levels over 90 frames (0.76 while
-    // only the head was relit: the shoulders' change now breathes with the
-    // face's, within the relit square). Read through 8-bit RGB, the
+    // 9.3% (27.8% in all), 4.24% and 0.29 levels over 90 frames (0.94
+    // counting the face's fade-in, which `pumping` leaves out). Read through
+    // 8-bit RGB, the
     // box edge was 28.8%: the clipping of near-black pixels that share a
     // chroma sample with brighter ones. Over the face, mottling is the
     // rounding of chroma on this dark clip's dark pixels, one chroma sample
@@ -222,7 +225,7 @@ fn a_film_clip_in_i420_is_relit_as_in_rgb() {
         face_mottled < 4.5,
         "mottling over the face {face_mottled:.2}%"
     );
-    assert!(pumped < 1.0, "pumping {pumped:.2} levels");
+    assert!(pumped < 0.6, "pumping {pumped:.2} levels");
 }
 
 #[test]
@@ -236,7 +239,7 @@ fn a_person_walking_about_the_simulated_room_is_relit_without_a_box() {
     let unexplained = largest(m.iter().map(|m| m.unexplained_box_edge));
     let mottled = median(m.iter().map(|m| m.mottling));
     let pumped = pumping(&m.iter().map(|m| m.means).collect::<Vec<_>>());
-    // 5.8% (9.4% in all), 0.48% and 0.24 levels (`benchmark --quality`);
+    // 7.9% (14.0% in all), 0.62% and 0.29 levels (`benchmark --quality`);
     // 9.7% where the picture has none with the face's shading clamped
     // (`plugin/frame/change.rs`).
     assert!(
@@ -251,8 +254,8 @@ fn a_person_walking_about_the_simulated_room_is_relit_without_a_box() {
 fn a_real_portrait_relit_to_neon_changes_visibly() {
     // A relighting must show. The astronaut's face, framed as a 720p webcam
     // would (her hair near the top edge), relit to `neon` by the starter
-    // model: 15.4% (RMS of the change over the face, `examples/target_lights
-    // direction`) with the default source, which adds the target's light to
+    // model: 19.5% (RMS of the change over the face, `examples/target_lights
+    // direction`; 16.4% before the face's finest shading passed) with the default source, which adds the target's light to
     // the light the starter guesses is on her face; 14.8% with `source-preset=
     // soft-front`, which replaces a frontal light. While her box came from the
     // whole frame, coarse (`face::search`), the starter guessed a bright
@@ -280,9 +283,11 @@ fn a_key_from_the_left_and_one_from_the_right_light_a_real_face_differently() {
     // simulator's exact truth brightens the image-right half by 26.1% more
     // under it than under `cool-key-right` (key swap -26.1,
     // `examples/target_lights direction`). The element draws the side with
-    // that sign on real faces: -8.3 on the portrait and -10.5 on the film clip
-    // (median over 30 frames; the still portrait reads the same over this
-    // test's 8, the film clip -7.4 over its 12); the release before
+    // that sign on real faces: -10.2 on the portrait and -14.2 on the film clip
+    // (median over 30 frames; the portrait -10.3 over this test's 8, the film
+    // clip -10.0 over its 12; before the face's finest shading passed over its
+    // box, 2026-12-08, -8.4 / -10.9 over 30, the film clip -7.4 over 12); the
+    // release before
     // 2026-12-06, whose starter was trained on lights within a monitor's
     // width only, drew -0.8 and -4.9, and the starter of dfd58a9, whose last
     // stage left the dome's side lights out, -4.5 on the portrait.
@@ -292,7 +297,7 @@ fn a_key_from_the_left_and_one_from_the_right_light_a_real_face_differently() {
     };
     let still = vec![portrait_720p(&folder).unwrap(); 8];
     let clip = decode(&film, 12).unwrap();
-    for (name, frames, bar) in [("portrait", still, -5.0), ("film clip", clip, -4.0)] {
+    for (name, frames, bar) in [("portrait", still, -9.0), ("film clip", clip, -8.5)] {
         let asymmetry = |preset| relit_to(&frames, preset, "").1.asymmetry;
         let swap = asymmetry("warm-key-left") - asymmetry("cool-key-right");
         eprintln!("{name}: key swap {swap:+.1}");

@@ -62,17 +62,12 @@ impl LightingChange {
     /// From the network's input and output (planar sRGB in [0, 1], 3 × res ×
     /// res), the face at `face` in the crop.
     pub fn new(input: &[f32], relit: &[f32], res: usize, face: FacePlace) -> LightingChange {
+        // At the network's own resolution, not halved: the face's finest
+        // shading (FACE_DETAIL_SMOOTHING) is a network pixel or two across.
         let relit = bound_invented_light(input, relit, res * res);
-        // The change is smooth over many network pixels: at half the
-        // resolution its blurs cost a quarter and lose nothing.
-        let (input, relit, res) = if res >= 64 && res.is_multiple_of(2) {
-            (halve(input, res), halve(&relit, res), res / 2)
-        } else {
-            (input.to_vec(), relit, res)
-        };
         LightingChange {
             res,
-            log_gain: smooth_log_gain(&input, &relit, res, face),
+            log_gain: smooth_log_gain(input, &relit, res, face),
             face,
         }
     }
@@ -114,23 +109,6 @@ impl LightingChange {
         let bottom = at(x, y1) + (at(x1, y1) - at(x, y1)) * tx;
         top + (bottom - top) * ty
     }
-}
-
-/// A planar image of 3 × res × res (res even) averaged over 2 × 2 pixels.
-fn halve(img: &[f32], res: usize) -> Vec<f32> {
-    let half = res / 2;
-    let mut out = Vec::with_capacity(3 * half * half);
-    for plane in img.chunks_exact(res * res) {
-        for y in 0..half {
-            let (top, bottom) = (&plane[2 * y * res..], &plane[(2 * y + 1) * res..]);
-            out.extend(
-                (0..half).map(|x| {
-                    (top[2 * x] + top[2 * x + 1] + bottom[2 * x] + bottom[2 * x + 1]) * 0.25
-                }),
-            );
-        }
-    }
-    out
 }
 
 /// The relit image with no pixel brighter than the input allows: at most
@@ -193,13 +171,32 @@ const SHADING_DETAIL: f32 = 0.02;
 /// I420; bar 10%), face mottling stayed (`benchmark --quality`). No window at
 /// all gave -4.6 / -9.1 / -19.6 with box edges of 9.2% and 17.8% (RGB).
 const FACE_SHADING_REACH: (f32, f32) = (1.0, 1.8);
+/// Radius of the finest blur of the brightness part, a network pixel: the
+/// face's own shading as the network drew it, which tells a light's side.
+/// The shading blur ([`SHADING_SMOOTHING`], four network pixels) mixes the
+/// face's two halves across its middle and takes a fifth of the side off:
+/// on the real portrait the network's own warm-key-left less cool-key-right
+/// was -12.0 before the blurs and -9.7 after it (face box, network crop; a
+/// one-off read in `LightingChange::new`, 2026-12-08).
+const FACE_DETAIL_SMOOTHING: f32 = 0.01;
+/// Distances from the face's centre, in half face heights, within which the
+/// finest shading passes whole (the face box's sides) and beyond which none
+/// of it does (its corners), blended by smoothstep between. Farther out it
+/// draws the edges of hair and of what lies behind it where the picture has
+/// none: out to 1.5 the film clip's largest such step was 9.9% (bar 10%), to
+/// 1.4 8.3% (`examples/real_footage --only megamind`).
+const FACE_DETAIL_REACH: (f32, f32) = (1.0, 1.4);
 
 /// Per pixel of a res × res map of the network's crop, how much of the
-/// face's own shading passes: 1 over the face (at `face`), falling by
-/// smoothstep to 0 at the end of [`FACE_SHADING_REACH`].
-fn face_shading_weights(res: usize, face: FacePlace) -> impl Iterator<Item = f32> {
+/// face's own shading passes: 1 over the face (at `face`), within the first
+/// of `reach` (in half face heights), falling by smoothstep to 0 at its second.
+fn face_shading_weights(
+    res: usize,
+    face: FacePlace,
+    reach: (f32, f32),
+) -> impl Iterator<Item = f32> {
     let half_face = 0.5 * face.height;
-    let (from, to) = FACE_SHADING_REACH;
+    let (from, to) = reach;
     (0..res * res).map(move |i| {
         let u = [i % res, i / res].map(|v| (v as f32 + 0.5) / res as f32);
         let distance = (u[0] - face.centre[0]).hypot(u[1] - face.centre[1]) / half_face;
@@ -212,10 +209,17 @@ fn face_shading_weights(res: usize, face: FacePlace) -> impl Iterator<Item = f32
 /// network's colour noise would otherwise blotch the skin.
 const COLOUR_SMOOTHING: f32 = 0.45;
 
-/// Two box blurs of a res × res map, of radius `fraction` of `res`.
+/// Two box blurs of a res × res map, of radius `fraction` of `res`, each way
+/// (shrinking at the borders).
+///
+/// Down the columns, a whole row at a time so that the sums run over every
+/// column together, then the same across the rows by way of the transpose: the
+/// change takes some ten of these a network frame, at the network's
+/// resolution, and a running sum along one row is a chain of dependent adds.
 fn blur(field: &[f32], res: usize, fraction: f32) -> Vec<f32> {
     let radius = ((fraction * res as f32).round() as usize).max(1);
-    box_blur(&box_blur(field, res, radius), res, radius)
+    let twice = |field: &[f32]| blur_columns(&blur_columns(field, res, radius), res, radius);
+    transpose(&twice(&transpose(&twice(field), res)), res)
 }
 
 /// Per channel, the log of the gain the relit image makes of the input,
@@ -249,6 +253,7 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) ->
         blurred_weight(BRIGHTNESS_SMOOTHING),
         blurred_weight(SHADING_SMOOTHING),
         blurred_weight(COLOUR_SMOOTHING),
+        blurred_weight(FACE_DETAIL_SMOOTHING),
     ];
     let weighted_blur = |field: &[f32], (fraction, blurred): &(f32, Vec<f32>)| -> Vec<f32> {
         let product: Vec<f32> = field.iter().zip(&weight).map(|(f, w)| f * w).collect();
@@ -260,13 +265,18 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) ->
         .map(|i| (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
         .collect();
     let coarse = weighted_blur(&mean, &weights[0]);
+    let fine = weighted_blur(&mean, &weights[3]);
     let brightness: Vec<f32> = coarse
         .iter()
         .zip(weighted_blur(&mean, &weights[1]))
-        .zip(face_shading_weights(res, face))
-        .map(|((c, f), face)| {
+        .zip(face_shading_weights(res, face, FACE_SHADING_REACH))
+        .zip(face_shading_weights(res, face, FACE_DETAIL_REACH))
+        .zip(&fine)
+        .map(|((((c, f), face), detail), fine)| {
             let shading = f - c;
-            c + face * shading + (1.0 - face) * shading.clamp(-SHADING_DETAIL, SHADING_DETAIL)
+            c + face * shading
+                + (1.0 - face) * shading.clamp(-SHADING_DETAIL, SHADING_DETAIL)
+                + detail * (fine - f)
         })
         .collect();
     gains.map(|g| {
@@ -283,27 +293,36 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) ->
 /// regions still count a little.
 const WEIGHT_FLOOR: f32 = 0.02;
 
-/// A box blur of a res × res field, `radius` each way, shrinking at the borders.
-fn box_blur(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
-    fn along(
-        src: &[f32],
-        res: usize,
-        radius: usize,
-        at: impl Fn(usize, usize) -> usize,
-    ) -> Vec<f32> {
-        let mut out = vec![0f32; src.len()];
-        let mut prefix = vec![0f32; res + 1];
-        for line in 0..res {
-            for k in 0..res {
-                prefix[k + 1] = prefix[k] + src[at(line, k)];
-            }
-            for k in 0..res {
-                let (lo, hi) = (k.saturating_sub(radius), (k + radius + 1).min(res));
-                out[at(line, k)] = (prefix[hi] - prefix[lo]) / (hi - lo) as f32;
-            }
+/// A box blur of a res × res field down its columns, `radius` each way,
+/// shrinking at the borders.
+fn blur_columns(field: &[f32], res: usize, radius: usize) -> Vec<f32> {
+    // Row y of `sums` is the sum of the field's first y rows.
+    let mut sums = vec![0f32; (res + 1) * res];
+    for (y, row) in field.chunks_exact(res).enumerate() {
+        let (above, below) = sums.split_at_mut((y + 1) * res);
+        for ((next, sum), v) in below[..res].iter_mut().zip(&above[y * res..]).zip(row) {
+            *next = sum + v;
         }
-        out
     }
-    let rows = along(field, res, radius, |y, x| y * res + x);
-    along(&rows, res, radius, |x, y| y * res + x)
+    let mut out = vec![0f32; field.len()];
+    for (y, out) in out.chunks_exact_mut(res).enumerate() {
+        let (lo, hi) = (y.saturating_sub(radius), (y + radius + 1).min(res));
+        let share = 1.0 / (hi - lo) as f32;
+        let (top, bottom) = (&sums[lo * res..][..res], &sums[hi * res..][..res]);
+        for ((out, top), bottom) in out.iter_mut().zip(top).zip(bottom) {
+            *out = (bottom - top) * share;
+        }
+    }
+    out
+}
+
+/// A res × res field with its rows and columns swapped.
+fn transpose(field: &[f32], res: usize) -> Vec<f32> {
+    let mut out = vec![0f32; field.len()];
+    for (y, row) in field.chunks_exact(res).enumerate() {
+        for (x, v) in row.iter().enumerate() {
+            out[x * res + y] = *v;
+        }
+    }
+    out
 }

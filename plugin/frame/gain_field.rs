@@ -26,11 +26,14 @@ use super::{Crop, FacePlace, FrameMut, LightingChange, PixelFormat, YuvMatrix, r
 use crate::parallel::beside;
 use yuv::YuvChange;
 
-/// Grid cells across the crop's side. The change is blurred over nearly half
-/// the crop (`BRIGHTNESS_SMOOTHING`) and the fade spans half of it, so a cell
-/// of 1/16 of the crop loses nothing the bilinear interpolation needs; the
-/// field costs about a tenth of the paste at 720p.
-const CELLS_PER_CROP: f32 = 16.0;
+/// Grid cells across the crop's side: a cell is three of the 96 px network's
+/// pixels, and the face box about eleven cells across, so the face's finest
+/// shading (`FACE_DETAIL_SMOOTHING`, a network pixel) reaches the frame
+/// sampled at about its own scale. At 16 cells, a cell of six network pixels,
+/// the portrait's key swap read -9.8 and its strength 14.5 against -10.2 and
+/// 15.4 (`examples/target_lights direction`); the paste costs 0.2-0.4 ms a
+/// frame more at 720p and 1080p (`examples/paste_speed`, 2026-12-08).
+const CELLS_PER_CROP: f32 = 32.0;
 
 /// Radius, as a fraction of the crop's side, about the crop's centre within
 /// which the change shows whole: the head (the crop is 2.9 face heights, its

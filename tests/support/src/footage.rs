@@ -251,6 +251,13 @@ pub struct Relit {
     pub shown: Option<(f32, usize)>,
 }
 
+impl Relit {
+    /// Whether the element showed its change only in part (a face fading in or out).
+    pub fn fading(&self) -> bool {
+        self.shown.is_some_and(|(strength, _)| strength < 1.0)
+    }
+}
+
 /// The frames relit by the element with no monitor stream by `model`, fed
 /// in `format` and in that format, each with what the element relit in it
 /// (None when it relit nothing).

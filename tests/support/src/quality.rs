@@ -618,14 +618,35 @@ pub fn mean_level(img: &impl Pixels, face: Region) -> f64 {
     255.0 * sum / count.max(1) as f64
 }
 
+/// One frame's part in [`pumping`]: the relit square's mean level in the
+/// input and in the output, and whether the element showed its change only in
+/// part there (a face fading in or out, `Relit::shown` under 1).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SquareMeans {
+    pub input: f64,
+    pub output: f64,
+    pub fading: bool,
+}
+
+impl SquareMeans {
+    /// The output's mean less the input's: what the relighting added.
+    fn change(&self) -> f64 {
+        self.output - self.input
+    }
+}
+
 /// The 95th percentile of the frame-to-frame change of the output's face-region
-/// mean less the input's, in levels, over the frames' `(input, output)` means;
-/// steps where the input's mean jumps by [`CUT_LEVELS`] (a cut) are left out.
-pub fn pumping(means: &[(f64, f64)]) -> f64 {
-    let mut steps: Vec<f64> = means
+/// mean less the input's, in levels. Left out: steps where the input's mean
+/// jumps by [`CUT_LEVELS`] (a cut), and steps into or out of a frame whose
+/// change was fading. A face found fades its change in over the element's
+/// fade, by design; counted, a fade's steps are the clip's largest and rise
+/// with the relighting's strength, so a stronger effect would read as pumping.
+pub fn pumping(frames: &[SquareMeans]) -> f64 {
+    let mut steps: Vec<f64> = frames
         .windows(2)
-        .filter(|p| (p[1].0 - p[0].0).abs() < CUT_LEVELS)
-        .map(|p| ((p[1].1 - p[1].0) - (p[0].1 - p[0].0)).abs())
+        .filter(|p| (p[1].input - p[0].input).abs() < CUT_LEVELS)
+        .filter(|p| !p[0].fading && !p[1].fading)
+        .map(|p| (p[1].change() - p[0].change()).abs())
         .collect();
     if steps.is_empty() {
         return 0.0;
@@ -850,23 +871,41 @@ mod tests {
     }
 
     #[test]
-    fn pumping_is_the_95th_percentile_step_between_cuts() {
-        let steady = vec![(100.0, 103.0); 40];
+    fn pumping_is_the_95th_percentile_step_between_cuts_and_fades() {
+        let frame = |input: f64, output: f64| SquareMeans {
+            input,
+            output,
+            fading: false,
+        };
+        let steady = vec![frame(100.0, 103.0); 40];
         assert_eq!(pumping(&steady), 0.0);
-        let breathing: Vec<(f64, f64)> = (0..40)
-            .map(|i| (100.0, if i % 10 < 5 { 100.0 } else { 107.0 }))
+        let breathing: Vec<SquareMeans> = (0..40)
+            .map(|i| frame(100.0, if i % 10 < 5 { 100.0 } else { 107.0 }))
             .collect();
         assert!((pumping(&breathing) - 7.0).abs() < 1e-9);
         // A cut moves input and output together by 50 levels: not pumping.
-        let cut: Vec<(f64, f64)> = (0..40)
+        let cut: Vec<SquareMeans> = (0..40)
             .map(|i| {
                 if i < 20 {
-                    (100.0, 103.0)
+                    frame(100.0, 103.0)
                 } else {
-                    (150.0, 160.0)
+                    frame(150.0, 160.0)
                 }
             })
             .collect();
         assert_eq!(pumping(&cut), 0.0);
+        // A face's change fading in by 2 levels a frame over 15 frames, then
+        // steady: the fade is not pumping, a step after it is.
+        let mut fade_in: Vec<SquareMeans> = (0..40)
+            .map(|i| SquareMeans {
+                fading: i < 15,
+                ..frame(100.0, 100.0 + 2.0 * i.min(15) as f64)
+            })
+            .collect();
+        assert_eq!(pumping(&fade_in), 0.0);
+        for later in &mut fade_in[30..] {
+            later.output += 3.0;
+        }
+        assert!((pumping(&fade_in) - 3.0).abs() < 1e-9);
     }
 }

@@ -28,8 +28,8 @@ use gstlsydrelight::frame::{Frame, OwnedFrame};
 use crate::checkout;
 use crate::footage::{Format, Relit, decode, denoised, read_y4m, relight, through};
 use crate::quality::{
-    BoxEdge, BoxEdges, Pixels, Region, View, box_edge_score, box_edges, change_map, mean_level,
-    mottling, mottling_by_luma, mottling_in_all, pumping,
+    BoxEdge, BoxEdges, Pixels, Region, SquareMeans, View, box_edge_score, box_edges, change_map,
+    mean_level, mottling, mottling_by_luma, mottling_in_all, pumping,
 };
 use crate::recording::ensure_recording;
 
@@ -327,11 +327,15 @@ pub fn measure(
         (edge, median(mottled), median(face_mottled))
     });
     let input_colour = read(&input, View::colour);
-    let means: Vec<(f64, f64)> = input_colour
+    let means: Vec<SquareMeans> = input_colour
         .iter()
         .zip(&output_colour)
-        .zip(&regions)
-        .map(|((i, o), &r)| (mean_level(i, r), mean_level(o, r)))
+        .zip(regions.iter().zip(&relits))
+        .map(|((i, o), (&r, relit))| SquareMeans {
+            input: mean_level(i, r),
+            output: mean_level(o, r),
+            fading: relit.as_ref().is_some_and(Relit::fading),
+        })
         .collect();
     let (input_pixels, output_pixels) = (read(&input, View::pixels), read(&output, View::pixels));
     let truth = truth.map(|truth| {
