@@ -895,7 +895,7 @@ mod tests {
             .collect();
         assert_eq!(pumping(&cut), 0.0);
         // A face's change fading in by 2 levels a frame over 15 frames, then
-        // steady: the fade is not pumping, a step after it is.
+        // steady: the fade is not pumping; breathing after it is.
         let mut fade_in: Vec<SquareMeans> = (0..40)
             .map(|i| SquareMeans {
                 fading: i < 15,
@@ -903,8 +903,8 @@ mod tests {
             })
             .collect();
         assert_eq!(pumping(&fade_in), 0.0);
-        for later in &mut fade_in[30..] {
-            later.output += 3.0;
+        for (i, later) in fade_in.iter_mut().enumerate().skip(15) {
+            later.output += if i % 10 < 5 { 0.0 } else { 3.0 };
         }
         assert!((pumping(&fade_in) - 3.0).abs() < 1e-9);
     }
