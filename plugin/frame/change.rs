@@ -183,8 +183,9 @@ const FACE_DETAIL_SMOOTHING: f32 = 0.01;
 /// finest shading passes whole (the face box's sides) and beyond which none
 /// of it does (its corners), blended by smoothstep between. Farther out it
 /// draws the edges of hair and of what lies behind it where the picture has
-/// none: out to 1.5 the film clip's largest such step was 9.9% (bar 10%), to
-/// 1.4 8.3% (`examples/real_footage --only megamind`).
+/// none: whole to 1.1 and gone by 1.5, the film clip's largest such step was
+/// 9.9% (bar 10%); with this reach 8.3% (`examples/real_footage --only
+/// megamind`, both on a grid of 16 cells; 8.3% on 32 too).
 const FACE_DETAIL_REACH: (f32, f32) = (1.0, 1.4);
 
 /// Per pixel of a res × res map of the network's crop, how much of the
@@ -224,8 +225,9 @@ fn blur(field: &[f32], res: usize, fraction: f32) -> Vec<f32> {
 
 /// Per channel, the log of the gain the relit image makes of the input,
 /// bounded by [`MAX_GAIN`] each way and smoothed: brightness over
-/// [`BRIGHTNESS_SMOOTHING`] with shading detail, colour over
-/// [`COLOUR_SMOOTHING`]. A gain that is not finite (the network's NaN) counts
+/// [`BRIGHTNESS_SMOOTHING`] with the face's shading ([`SHADING_SMOOTHING`])
+/// and, over the face box, its finest shading ([`FACE_DETAIL_SMOOTHING`]);
+/// colour over [`COLOUR_SMOOTHING`]. A gain that is not finite (the network's NaN) counts
 /// as no change.
 fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) -> [Vec<f32>; 3] {
     let n = res * res;
@@ -249,12 +251,13 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) ->
     // Normalised convolution: the blur of weight × field over the blur of the
     // weight, the latter once per radius.
     let blurred_weight = |fraction| (fraction, blur(&weight, res, fraction));
-    let weights = [
-        blurred_weight(BRIGHTNESS_SMOOTHING),
-        blurred_weight(SHADING_SMOOTHING),
-        blurred_weight(COLOUR_SMOOTHING),
-        blurred_weight(FACE_DETAIL_SMOOTHING),
-    ];
+    let [coarse_weight, shading_weight, colour_weight, finest_weight] = [
+        BRIGHTNESS_SMOOTHING,
+        SHADING_SMOOTHING,
+        COLOUR_SMOOTHING,
+        FACE_DETAIL_SMOOTHING,
+    ]
+    .map(blurred_weight);
     let weighted_blur = |field: &[f32], (fraction, blurred): &(f32, Vec<f32>)| -> Vec<f32> {
         let product: Vec<f32> = field.iter().zip(&weight).map(|(f, w)| f * w).collect();
         let mut out = blur(&product, res, *fraction);
@@ -264,24 +267,25 @@ fn smooth_log_gain(input: &[f32], relit: &[f32], res: usize, face: FacePlace) ->
     let mean: Vec<f32> = (0..n)
         .map(|i| (gains[0][i] + gains[1][i] + gains[2][i]) / 3.0)
         .collect();
-    let coarse = weighted_blur(&mean, &weights[0]);
-    let fine = weighted_blur(&mean, &weights[3]);
+    let coarse = weighted_blur(&mean, &coarse_weight);
+    let finest = weighted_blur(&mean, &finest_weight);
     let brightness: Vec<f32> = coarse
         .iter()
-        .zip(weighted_blur(&mean, &weights[1]))
+        .zip(weighted_blur(&mean, &shading_weight))
         .zip(face_shading_weights(res, face, FACE_SHADING_REACH))
         .zip(face_shading_weights(res, face, FACE_DETAIL_REACH))
-        .zip(&fine)
-        .map(|((((c, f), face), detail), fine)| {
-            let shading = f - c;
-            c + face * shading
-                + (1.0 - face) * shading.clamp(-SHADING_DETAIL, SHADING_DETAIL)
-                + detail * (fine - f)
+        .zip(&finest)
+        .map(|((((coarse, shaded), on_face), on_face_box), finest)| {
+            let shading = shaded - coarse;
+            coarse
+                + on_face * shading
+                + (1.0 - on_face) * shading.clamp(-SHADING_DETAIL, SHADING_DETAIL)
+                + on_face_box * (finest - shaded)
         })
         .collect();
     gains.map(|g| {
         let colour: Vec<f32> = g.iter().zip(&mean).map(|(g, m)| g - m).collect();
-        weighted_blur(&colour, &weights[2])
+        weighted_blur(&colour, &colour_weight)
             .iter()
             .zip(&brightness)
             .map(|(c, b)| c + b)

@@ -150,9 +150,8 @@ fn a_lights_side_passes_nearly_whole_over_the_face_box() {
         .collect();
     let change = LightingChange::new(&input, &relit, res, face);
     let (mut sums, mut counts) = ([0f32; 2], [0f32; 2]);
-    let at = change.res;
-    for i in 0..at * at {
-        let u = [i % at, i / at].map(|v| (v as f32 + 0.5) / at as f32);
+    for i in 0..n {
+        let u = [i % res, i / res].map(|v| (v as f32 + 0.5) / res as f32);
         let (dx, dy) = (u[0] - face.centre[0], u[1] - face.centre[1]);
         if dx.abs() < face.height / 2.0 && dy.abs() < face.height / 2.0 {
             let half = usize::from(dx > 0.0);
